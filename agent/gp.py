@@ -1,0 +1,137 @@
+"""Continuous-time plans: the white-noise-on-acceleration (WNOA) Gaussian process.
+
+A plan is N support states x_i = (p_i, v_i) at absolute times t_i = t0 + i*dt. Under the
+WNOA prior (paper eq. (3); Barfoot, *State Estimation for Robotics*, ch. 11) each axis is
+an independent double integrator driven by white noise of power spectral density Qc:
+
+    Phi(s) = [[1, s], [0, 1]]                          transition over time s
+    Q(s)   = Qc [[s^3/3, s^2/2], [s^2/2, s]]           process covariance over time s
+
+and the posterior mean between two support states at t_i < tau < t_{i+1} is
+
+    x(tau) = Lambda(tau) x_i + Psi(tau) x_{i+1}
+    Psi(tau)    = Q(tau - t_i) Phi(t_{i+1} - tau)^T Q(dt)^-1
+    Lambda(tau) = Phi(tau - t_i) - Psi(tau) Phi(dt)
+
+Qc cancels, so Lambda and Psi are 2x2 per axis and shared by both axes (the position row
+is the cubic Hermite spline through the two states). GTSAM's WnoaInterpFactorPoint2 uses
+the same matrices; tests/agent/test_gp.py checks that they agree.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+def transition(s: float) -> np.ndarray:
+    return np.array([[1.0, s], [0.0, 1.0]])
+
+
+def process_covariance(s: float, qc: float = 1.0) -> np.ndarray:
+    return qc * np.array([[s**3 / 3.0, s**2 / 2.0], [s**2 / 2.0, s]])
+
+
+def interpolation_matrices(dt: float, tau: float) -> tuple[np.ndarray, np.ndarray]:
+    """(Lambda, Psi) for a time tau in [0, dt] after the left support state."""
+    if tau <= 0.0:
+        return np.eye(2), np.zeros((2, 2))
+    if tau >= dt:
+        return np.zeros((2, 2)), np.eye(2)
+    psi = process_covariance(tau) @ transition(dt - tau).T @ np.linalg.inv(process_covariance(dt))
+    lam = transition(tau) - psi @ transition(dt)
+    return lam, psi
+
+
+def interpolation_weights(dt: float, fractions: np.ndarray) -> np.ndarray:
+    """Weights W (k, 2, 4) so that [p(tau_k), v(tau_k)] = W[k] @ [p_i, v_i, p_i+1, v_i+1].
+
+    ``fractions`` are tau/dt in [0, 1]. Row 0 of W gives the position, row 1 the velocity.
+    """
+    weights = np.empty((len(fractions), 2, 4))
+    for k, fraction in enumerate(fractions):
+        lam, psi = interpolation_matrices(dt, float(fraction) * dt)
+        weights[k, :, 0:2] = lam
+        weights[k, :, 2:4] = psi
+    return weights
+
+
+@dataclass(frozen=True)
+class Plan:
+    """A car's trajectory: support states at t0 + i*dt, positions and velocities (N, 2)."""
+
+    t0: float
+    dt: float
+    positions: np.ndarray
+    velocities: np.ndarray
+
+    @property
+    def n(self) -> int:
+        return len(self.positions)
+
+    @property
+    def t_end(self) -> float:
+        return self.t0 + self.dt * (self.n - 1)
+
+    def times(self) -> np.ndarray:
+        return self.t0 + self.dt * np.arange(self.n)
+
+    def state_at(self, times: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
+        """Positions and velocities at absolute times (GP interpolation).
+
+        Before t0 the plan holds its first state; after its end it rests at its last
+        position with zero velocity (a plan ends at its goal, standing still).
+        """
+        t = np.atleast_1d(np.asarray(times, dtype=float))
+        s = (t - self.t0) / self.dt
+        before = s <= 0.0
+        after = s >= self.n - 1
+        index = np.clip(np.floor(s).astype(np.intp), 0, self.n - 2)
+        u = np.clip(s - index, 0.0, 1.0)
+        # Cubic Hermite form of Lambda/Psi (identical to interpolation_matrices).
+        dt = self.dt
+        h00 = 2 * u**3 - 3 * u**2 + 1
+        h10 = u**3 - 2 * u**2 + u
+        h01 = -2 * u**3 + 3 * u**2
+        h11 = u**3 - u**2
+        p0 = self.positions[index]
+        p1 = self.positions[index + 1]
+        v0 = self.velocities[index]
+        v1 = self.velocities[index + 1]
+        pos = h00[:, None] * p0 + (h10 * dt)[:, None] * v0 + h01[:, None] * p1 + (h11 * dt)[:, None] * v1
+        d00 = (6 * u**2 - 6 * u) / dt
+        d10 = 3 * u**2 - 4 * u + 1
+        d01 = (-6 * u**2 + 6 * u) / dt
+        d11 = 3 * u**2 - 2 * u
+        vel = d00[:, None] * p0 + d10[:, None] * v0 + d01[:, None] * p1 + d11[:, None] * v1
+        pos = np.where(before[:, None], self.positions[0], pos)
+        vel = np.where(before[:, None], self.velocities[0], vel)
+        pos = np.where(after[:, None], self.positions[-1], pos)
+        vel = np.where(after[:, None], 0.0, vel)
+        return pos, vel
+
+    def position_at(self, times: np.ndarray | float) -> np.ndarray:
+        return self.state_at(times)[0]
+
+    def acceleration_at(self, times: np.ndarray | float) -> np.ndarray:
+        """Acceleration of the posterior mean (piecewise linear in time)."""
+        t = np.atleast_1d(np.asarray(times, dtype=float))
+        s = (t - self.t0) / self.dt
+        index = np.clip(np.floor(s).astype(np.intp), 0, self.n - 2)
+        u = np.clip(s - index, 0.0, 1.0)[:, None]
+        dt = self.dt
+        p0, p1 = self.positions[index], self.positions[index + 1]
+        v0, v1 = self.velocities[index], self.velocities[index + 1]
+        acc = ((12 * u - 6) * (p0 - p1) / dt**2 + (6 * u - 4) * v0 / dt + (6 * u - 2) * v1 / dt)
+        outside = (s < 0.0) | (s > self.n - 1)
+        return np.where(outside[:, None], 0.0, acc)
+
+    def resampled(self, t0: float, dt: float, n: int) -> "Plan":
+        """The same trajectory on a new time grid (warm start of a replan)."""
+        times = t0 + dt * np.arange(n)
+        pos, vel = self.state_at(times)
+        return Plan(t0=t0, dt=dt, positions=pos, velocities=vel)
+
+    def shifted(self, offset: np.ndarray) -> "Plan":
+        return Plan(self.t0, self.dt, self.positions + np.asarray(offset), self.velocities.copy())
