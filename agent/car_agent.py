@@ -1,0 +1,323 @@
+"""One car's agent: what it sees, what it is told, whom it trusts and what it plans.
+
+Pure logic, no I/O: the in-process simulation (agent.fleet_sim) and the car process hand
+it observations and decoded messages and ask it for plans and reports at the times they
+choose. All times are seconds on the fleet clock.
+
+How peers' plans are used (DESIGN.md, "Trust" and "Fleet bus"):
+* A plan message is checked against where its sender was seen when it sent it (its
+  stamp; the observation nearest that time). The discrepancy is transparency evidence
+  (graded, agent.trust); a plan delayed past ``stale_after_s`` is dropped unjudged. A plan that
+  misses by more than ``plan_reject_m`` is not planned against: we keep the sender's last
+  plan that agreed with what we saw. Observation beats testimony.
+* A peer with no usable plan for ``stale_after_s`` (silent, partitioned, or lying every
+  time) is predicted from its observed motion and kept at the widest safety distance.
+  Silence is never counted as lying: it yields no transparency evidence at all.
+* Safety and consistency evidence come every ``evidence_period_s`` from observations.
+  Consistency compares accelerations averaged over CONSISTENCY_WINDOW_S: the change of
+  the peer's observed velocity over the window against the change announced by the plan
+  it had shared when the window began -- "did it do what it said it would do?".
+  Differencing velocities over half a second is far less noisy than a second derivative
+  of noisy poses, and one plan for both ends keeps late or bunched messages from
+  looking like erratic driving.
+
+Decentralised consensus: every agent replans at a fixed rate against the latest accepted
+plans of its peers and publishes its own; the fleet iterates to agreement. Ties and
+oscillations are broken by (1) desynchronised replanning phases, (2) warm starts, which
+keep each car near its previous plan (a car does not flip sides between replans), and
+(3) a planned arrival time that never lies further ahead than the remaining path at
+cruise speed, so a car always intends to move on and waits only while someone is in
+its way (no car plans to wait for another that waits for it).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import Counter, deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from agent import misbehaviour
+from agent.config import CarConfig, Scenario
+from agent.gp import Plan
+from agent.messages import PlanMessage, TrustReport
+from agent.planner import PeerConstraint, PlanningError, PlanRequest, PlanResult, plan_trajectory
+from agent.track import Track
+from agent.trust import CONSISTENCY, SAFETY, TRANSPARENCY, TrustBook, graded
+from agent.world import SignedDistanceField
+
+log = logging.getLogger(__name__)
+
+ARRIVAL_SLACK_S = 1.0
+"""Added to path length / cruise speed: time to speed up and slow down."""
+STALE_PREDICTION_S = 1.0
+"""A silent peer is predicted to keep its observed velocity this long, then to stop."""
+CONSISTENCY_WINDOW_S = 0.5
+START_FROM_PLAN_M = 0.05
+START_FROM_PLAN_MPS = 0.15
+"""A replan starts from the previous plan while the car is this close to it."""
+
+
+@dataclass
+class PeerView:
+    """What we know of one peer."""
+
+    latest: PlanMessage | None = None
+    latest_received: float = -np.inf
+    accepted: Plan | None = None
+    """The last plan that agreed with where the peer was seen."""
+    accepted_received: float = -np.inf
+    goal: tuple[float, float] | None = None
+    velocities: deque = field(default_factory=lambda: deque(maxlen=64))
+    """(t, observed velocity) at evidence ticks."""
+    history: deque = field(default_factory=lambda: deque(maxlen=32))
+    """(received at, plan) of the plans accepted lately."""
+
+
+@dataclass
+class CarAgent:
+    car: CarConfig
+    scenario: Scenario
+    sdf: SignedDistanceField
+    depart_at: float = 0.0
+    """When the car may start moving (fleet clock)."""
+    cruise_speed_mps: float | None = None
+    rng: np.random.Generator = field(default_factory=lambda: np.random.default_rng(0))
+    """Drives this car's misbehaviour only (seeded by the caller)."""
+
+    def __post_init__(self) -> None:
+        self.tracks: dict[int, Track] = {}
+        self.peers: dict[int, PeerView] = {}
+        self.trust = TrustBook(owner=self.car.id, config=self.scenario.trust)
+        self.plan: Plan | None = None
+        self.last_result: PlanResult | None = None
+        self.replan_ms: deque = deque(maxlen=100_000)  # bounded: a lab run may last hours
+        self.counters: Counter = Counter()
+        self.at_goal = False
+        self._seq = Counter()
+        self._last_evidence = -np.inf
+        self.set_departure(self.depart_at, self.cruise_speed_mps or self.scenario.planner.cruise_speed_mps)
+
+    def set_departure(self, depart_at: float, cruise_speed_mps: float) -> None:
+        """When the car may set off and how fast it cruises (the operator's start)."""
+        self.depart_at = depart_at
+        self.cruise = cruise_speed_mps
+        points = np.array([self.car.start, *self.car.route, self.car.goal])
+        length = float(np.sum(np.linalg.norm(np.diff(points, axis=0), axis=1)))
+        self.t_arrive = depart_at + length / cruise_speed_mps + ARRIVAL_SLACK_S
+
+    # --- inputs -----------------------------------------------------------------------------
+
+    def observe(self, t: float, car_id: int, x: float, y: float, yaw: float) -> None:
+        """A pose of any car (ourselves included), e.g. from NatNet."""
+        self.tracks.setdefault(car_id, Track()).add(t, x, y, yaw)
+
+    def receive(self, message: PlanMessage | TrustReport, now: float) -> None:
+        """A decoded, validated message from a peer."""
+        if message.sender == self.car.id:
+            return
+        if isinstance(message, TrustReport):
+            self.trust.receive(message)
+            return
+        view = self.peers.setdefault(message.sender, PeerView())
+        view.latest, view.latest_received, view.goal = message, now, message.goal
+        if now - message.stamp > self.scenario.trust.stale_after_s:
+            self.counters["plans_too_late"] += 1  # delayed in the network: no use, no evidence
+            return
+        # The claim is checked where the sender was seen when it made it (the message's
+        # stamp), not now: a plan that arrives late is not a lie.
+        track = self.tracks.get(message.sender)
+        position = track.position_at(message.stamp) if track else None
+        if position is None:
+            # Nothing to check it against (not seen then, or pose lost): use it, unverified.
+            self.counters["plans_unverified"] += 1
+            view.accepted, view.accepted_received = message.plan, now
+            return
+        (claimed,) = message.plan.position_at(message.stamp)
+        miss = float(np.linalg.norm(claimed - position))
+        success, failure = graded(miss, self.scenario.trust.transparency_tolerance_m)
+        self.trust.record(message.sender, TRANSPARENCY, success, failure, now)
+        if miss <= self.scenario.trust.plan_reject_m:
+            view.accepted, view.accepted_received = message.plan, now
+            view.history.append((now, message.plan))
+        else:
+            self.counters["plans_rejected"] += 1
+
+    def peer_gone(self, peer: int) -> None:
+        """The peer's process left the bus (liveliness lost): stop believing its last plan
+        now rather than after stale_after_s; it is predicted from what we see of it."""
+        view = self.peers.get(peer)
+        if view is not None:
+            view.accepted_received = -np.inf
+            self.counters["peers_gone"] += 1
+
+    # --- evidence ---------------------------------------------------------------------------
+
+    def gather_evidence(self, now: float) -> None:
+        """Safety and consistency evidence about every seen peer (rate-limited)."""
+        config = self.scenario.trust
+        if now - self._last_evidence < config.evidence_period_s - 1e-9:
+            return
+        self._last_evidence = now
+        motions = {cid: tr.motion() for cid, tr in self.tracks.items()}
+        motions = {cid: m for cid, m in motions.items() if m is not None and now - m.stamp <= 0.2}
+        for peer, motion in motions.items():
+            if peer == self.car.id:
+                continue
+            others = [m.position for cid, m in motions.items() if cid != peer]
+            if others:
+                closest = min(float(np.linalg.norm(motion.position - p)) for p in others)
+                breach = closest < config.safety_distance_m
+                self.trust.record(peer, SAFETY, 0.0 if breach else 1.0, 1.0 if breach else 0.0, now)
+            view = self.peers.get(peer)
+            if view is not None:
+                view.velocities.append((motion.stamp, motion.velocity))
+                mismatch = _acceleration_mismatch(view, config.stale_after_s)
+                if mismatch is not None:
+                    s, f = graded(mismatch, config.consistency_tolerance_mps2)
+                    self.trust.record(peer, CONSISTENCY, s, f, now)
+
+    # --- planning ---------------------------------------------------------------------------
+
+    def peer_constraints(self, now: float) -> list[tuple[int, PeerConstraint]]:
+        """Every peer we plan around, with the plan we believe and the distance to keep."""
+        planner, trust = self.scenario.planner, self.scenario.trust
+        widest = planner.epsilon_m * trust.epsilon_gain_max
+        constraints = []
+        for peer in sorted(set(self.peers) | set(self.tracks)):
+            if peer == self.car.id:
+                continue
+            view = self.peers.get(peer)
+            if view and view.accepted is not None and now - view.accepted_received <= trust.stale_after_s:
+                epsilon = self.trust.epsilon(peer, now, planner.epsilon_m, planner.transparency)
+                constraints.append((peer, PeerConstraint(view.accepted, epsilon)))
+                continue
+            predicted = self._predict_from_observation(peer, now)
+            if predicted is not None:
+                self.counters["peers_predicted"] += 1
+                constraints.append((peer, PeerConstraint(predicted, widest)))
+        return constraints
+
+    def _predict_from_observation(self, peer: int, now: float) -> Plan | None:
+        track = self.tracks.get(peer)
+        motion = track.motion() if track else None
+        if motion is None or now - motion.stamp > self.scenario.trust.stale_after_s:
+            return None
+        n, dt = 9, 0.25
+        tau = np.arange(n) * dt
+        moving = tau < STALE_PREDICTION_S
+        positions = motion.position + np.minimum(tau, STALE_PREDICTION_S)[:, None] * motion.velocity
+        velocities = np.where(moving[:, None], motion.velocity, 0.0)
+        return Plan(t0=motion.stamp, dt=dt, positions=positions, velocities=velocities)
+
+    def replan(self, now: float) -> PlanResult | None:
+        """Plan from our observed state; None if we cannot (no pose yet, or at the goal)."""
+        own = self.tracks.get(self.car.id)
+        motion = own.motion() if own else None
+        if motion is None:
+            self.counters["replan_no_pose"] += 1
+            return None
+        goal = np.asarray(self.car.goal, dtype=float)
+        if self.at_goal or (np.linalg.norm(motion.position - goal) <= self.scenario.tracking.goal_tolerance_m
+                            and now >= self.depart_at):
+            self.at_goal = True
+            self.plan = _standing(motion.position, now)
+            return None
+        t0 = max(now, self.depart_at)
+        position, velocity = self._start_state(motion, t0, now)
+        remaining = self._remaining_length(motion.position, t0)
+        # A car that yielded is behind schedule: its arrival slips so that it goes on at
+        # its cruise speed instead of racing to catch up.
+        self.t_arrive = max(self.t_arrive, t0 + remaining / self.cruise + 0.5 * ARRIVAL_SLACK_S)
+        t_arrive = self.t_arrive
+        peers = tuple(c for _, c in self.peer_constraints(now))
+        request = PlanRequest(
+            t_now=t0, position=position, velocity=velocity, goal=goal, t_arrive=t_arrive,
+            peers=peers, warm_start=self.plan, route=self.car.route,
+            lane=(self.car.start, *self.car.route),
+        )
+        try:
+            result = plan_trajectory(request, self.scenario.planner, self.sdf)
+        except PlanningError as exc:
+            self.counters["replan_failed"] += 1
+            log.warning("car %d: replanning failed, keeping the previous plan: %s", self.car.id, exc)
+            return None
+        self.plan = result.plan
+        self.last_result = result
+        self.replan_ms.append(result.time_ms)
+        return result
+
+    def _start_state(self, motion, t0: float, now: float) -> tuple[np.ndarray, np.ndarray]:
+        """Where the new plan starts: our previous plan's state at t0 while we track it
+        closely (the reference stays continuous across replans, so the car does not
+        jerk at every replan), else the measured state."""
+        if now < self.depart_at:
+            return motion.position, np.zeros(2)
+        if self.plan is not None:
+            (p,), (v,) = self.plan.state_at(t0)
+            if (np.linalg.norm(p - motion.position) <= START_FROM_PLAN_M
+                    and np.linalg.norm(v - motion.velocity) <= START_FROM_PLAN_MPS):
+                return p, v
+        self.counters["replan_from_measured"] += 1
+        return motion.position, motion.velocity
+
+    def _remaining_length(self, position: np.ndarray, t0: float) -> float:
+        if self.plan is None:
+            points = np.array([position, *self.car.route, self.car.goal])
+        else:
+            times = np.linspace(t0, max(self.plan.t_end, t0), 30)
+            points = np.vstack([position, self.plan.position_at(times)])
+        return float(np.sum(np.linalg.norm(np.diff(points, axis=0), axis=1)))
+
+    # --- outputs ----------------------------------------------------------------------------
+
+    def next_seq(self, kind: str) -> int:
+        self._seq[kind] += 1
+        return self._seq[kind]
+
+    def plan_message(self, now: float) -> PlanMessage | None:
+        """Our plan as we share it (falsified if this car is set to misinform)."""
+        if self.plan is None:
+            return None
+        shared, falsified = misbehaviour.maybe_falsify(self.plan, self.car.misinformation, self.rng)
+        if falsified:
+            self.counters["plans_falsified"] += 1
+        return PlanMessage(self.car.id, self.next_seq("plan"), now, shared,
+                           (float(self.car.goal[0]), float(self.car.goal[1])))
+
+    def trust_message(self, now: float) -> TrustReport:
+        planner = self.scenario.planner
+        report = self.trust.report(self.car.id, self.next_seq("trust"), now, planner.epsilon_m,
+                                   planner.transparency)
+        if self.car.false_testimony:
+            report = misbehaviour.falsify_testimony(report)
+        return report
+
+    def trust_in(self, peer: int, now: float) -> float:
+        return self.trust.trust(peer, now)
+
+
+def _acceleration_mismatch(view: PeerView, stale_after_s: float) -> float | None:
+    """|mean observed - mean announced acceleration| over the last CONSISTENCY_WINDOW_S,
+    the announcement being the plan accepted last before the window began; None if there
+    is no such fresh plan or not enough observations yet."""
+    t, observed = view.velocities[-1]
+    start = next(((t_old, v_old) for t_old, v_old in reversed(view.velocities)
+                  if t - t_old >= CONSISTENCY_WINDOW_S - 1e-6), None)
+    if start is None:
+        return None
+    t_old, observed_old = start
+    announced = next(((r, p) for r, p in reversed(view.history) if r <= t_old), None)
+    if announced is None or t_old - announced[0] > stale_after_s:
+        return None
+    plan = announced[1]
+    (v_then,), (v_now,) = plan.state_at(t_old)[1], plan.state_at(t)[1]
+    change = (observed - observed_old) - (v_now - v_then)
+    return float(np.linalg.norm(change)) / (t - t_old)
+
+
+def _standing(position: np.ndarray, now: float) -> Plan:
+    """The plan of a car that has arrived: stay where it is."""
+    n = 3
+    return Plan(t0=now, dt=1.0, positions=np.tile(position, (n, 1)), velocities=np.zeros((n, 2)))

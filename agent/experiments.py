@@ -1,0 +1,340 @@
+"""The paper's experiments, each run with its factor on and off over many seeds.
+
+    trustfg experiment {proximity,consistency,transparency,lab,all} [--seed N] [--seeds K]
+                       [--out DIR] [--jobs J]
+
+writes DIR/<name>/metrics.json and PNG figures and prints a table. metrics.json is
+
+    {"experiment": NAME, "scenario": FILE, "seeds": [...],
+     "variants": {"on": [RUN, ...], "off": [RUN, ...]}, "summary": {...}}
+
+with one RUN per seed (keys documented in the README). The lab experiment has a third
+variant "A" (everyone honest); its "on"/"off" are the paper's scenario B (car 1 at 40 %
+misinformation) with and without the transparency factor.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import functools
+import json
+import logging
+import os
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from agent import metrics
+from agent.config import Scenario, load_scenario
+from agent.fleet_sim import RunRecord, simulate
+from agent.world import build_sdf
+
+log = logging.getLogger(__name__)
+
+SCENARIOS = Path(__file__).resolve().parent.parent / "deploy" / "scenarios"
+LIAR_ID = 1
+LIAR_MISINFORMATION = 0.4
+TRUST_GAP = 0.2
+TRUST_SETTLE_S = 3.0
+HONEST_TRUST_FLOOR = 0.8
+
+
+def factors(scenario: Scenario, **switches: bool) -> Scenario:
+    return dataclasses.replace(scenario, planner=dataclasses.replace(scenario.planner, **switches))
+
+
+def with_liar(scenario: Scenario, liar: int = LIAR_ID, p: float = LIAR_MISINFORMATION) -> Scenario:
+    """Car ``liar`` publishes falsified plans in a fraction p of messages and lies in its
+    testimonies."""
+    cars = tuple(dataclasses.replace(c, misinformation=p, false_testimony=True) if c.id == liar else c
+                 for c in scenario.cars)
+    return dataclasses.replace(scenario, cars=cars)
+
+
+ALL_ON = dict(proximity=True, consistency=True, transparency=True)
+ALL_OFF = dict(proximity=False, consistency=False, transparency=False)
+
+
+@dataclass(frozen=True)
+class Experiment:
+    name: str
+    scenario_file: str
+    variants: dict[str, Callable[[Scenario], Scenario]]
+    question: str
+
+
+EXPERIMENTS = {
+    "proximity": Experiment(
+        "proximity", "intersection.toml",
+        {"on": functools.partial(factors, **ALL_ON), "off": functools.partial(factors, **ALL_OFF)},
+        "Do the trust factors prevent proximity breaches on conflicting routes?"),
+    "consistency": Experiment(
+        "consistency", "intersection.toml",
+        {"on": functools.partial(factors, **ALL_ON),
+         "off": functools.partial(factors, **(ALL_ON | dict(consistency=False)))},
+        "Does the consistency factor make the cars' accelerations more alike?"),
+    "transparency": Experiment(
+        "transparency", "lab.toml",
+        {"on": lambda s: factors(with_liar(s), **ALL_ON),
+         "off": lambda s: factors(with_liar(s), **(ALL_ON | dict(transparency=False)))},
+        "Do honest cars keep a wider berth from a car that publishes 40 % misinformation?"),
+    "lab": Experiment(
+        "lab", "lab.toml",
+        {"A": functools.partial(factors, **ALL_ON),
+         "on": lambda s: factors(with_liar(s), **ALL_ON),
+         "off": lambda s: factors(with_liar(s), **(ALL_ON | dict(transparency=False)))},
+        "The paper's lab left turns: A all honest, B car 1 at 40 % misinformation."),
+}
+
+
+# --- one run ---------------------------------------------------------------------------------
+
+
+@functools.lru_cache(maxsize=8)
+def _sdf(world):
+    return build_sdf(world)
+
+
+def run_one(scenario: Scenario, seed: int) -> tuple[dict, RunRecord]:
+    """Simulate one seed and summarise it as a RUN dict (see the README)."""
+    record = simulate(scenario, seed, sdf=_sdf(scenario.world))
+    return summarise(scenario, record), record
+
+
+def summarise(scenario: Scenario, record: RunRecord) -> dict:
+    positions = record.states[:, :, :2]
+    radii = np.array(record.radii)
+    distance = metrics.min_distance_matrix(positions)
+    clearance = metrics.clearance_matrix(distance, radii)
+    arrived = record.arrived_at
+    reached = [a is not None for a in arrived]
+    run = {
+        "seed": record.seed,
+        "car_ids": record.car_ids,
+        "min_distance": _round(distance),
+        "min_clearance": _round(clearance),
+        "breaches": metrics.breaches(clearance, record.car_ids),
+        "obstacle_min_clearance": round(metrics.obstacle_min_clearance(positions, radii, _sdf(scenario.world)), 4),
+        "reached_goal": reached,
+        "makespan_s": round(max(arrived), 3) if all(reached) else None,
+        "inconsistency": round(metrics.inconsistency_index(record.times, record.states, record.depart_at, arrived), 4),
+        "trust": _round(record.trust[-1]),
+        "replan_ms_median": round(float(np.median(np.concatenate(record.replan_ms))), 2)
+        if any(record.replan_ms) else None,
+    }
+    liars = [c.id for c in scenario.cars if c.misinformation > 0]
+    if liars:
+        liar = record.car_ids.index(liars[0])
+        honest = [i for i, c in enumerate(record.car_ids) if record.car_ids[i] not in liars]
+        run["liar_id"] = liars[0]
+        run["honest_ids"] = [record.car_ids[i] for i in honest]
+        run["liar_min_distance"] = [round(float(distance[i, liar]), 4) for i in honest]
+        after = record.trust_times >= TRUST_SETTLE_S
+        honest_pairs = [record.trust[after][:, a, b] for a in honest for b in honest if a != b]
+        run["honest_trust_min_after_settle"] = round(float(np.min(honest_pairs)), 4) if honest_pairs else None
+        gaps = [record.trust[after][:, a, [b for b in honest if b != a]].min(axis=1) - record.trust[after][:, a, liar]
+                for a in honest]
+        run["trust_gap_min_after_settle"] = round(float(np.min(gaps)), 4)
+        run["trust_separated_at_s"] = metrics.trust_separation(record.trust_times, record.trust, liar, honest, TRUST_GAP)
+    return run
+
+
+def _round(matrix: np.ndarray) -> list[list[float]]:
+    return [[round(float(x), 4) for x in row] for row in matrix]
+
+
+# --- a whole experiment ------------------------------------------------------------------------
+
+
+def _job(args: tuple[Scenario, int]) -> tuple[dict, RunRecord]:
+    scenario, seed = args
+    return run_one(scenario, seed)
+
+
+def run_experiment(name: str, seeds: list[int], out: Path, jobs: int, scenario_file: str | None = None,
+                   figures: bool = True) -> dict:
+    experiment = EXPERIMENTS[name]
+    path = Path(scenario_file) if scenario_file else SCENARIOS / experiment.scenario_file
+    base = load_scenario(path)
+    results: dict[str, list[dict]] = {}
+    records: dict[str, list[RunRecord]] = {}
+    started = time.perf_counter()
+    tasks = [(variant, make(base), seed) for variant, make in experiment.variants.items() for seed in seeds]
+    progress = Progress(f"{name}", len(tasks))
+    with _pool(jobs) as pool:
+        futures = [(variant, seed, pool.submit(_job, (scenario, seed))) for variant, scenario, seed in tasks]
+        for variant, seed, future in futures:
+            run, record = future.result()
+            results.setdefault(variant, []).append(run)
+            records.setdefault(variant, []).append(record)
+            progress.step(f"{variant} seed {seed}: min clearance {np.min(np.array(run['min_clearance']) + np.eye(len(run['car_ids'])) * 9):.3f} m")
+    progress.done()
+    report = {
+        "experiment": name,
+        "scenario": path.name,
+        "question": experiment.question,
+        "seeds": seeds,
+        "variants": results,
+        "summary": summary(name, results),
+        "wall_time_s": round(time.perf_counter() - started, 1),
+    }
+    target = out / name
+    target.mkdir(parents=True, exist_ok=True)
+    (target / "metrics.json").write_text(json.dumps(report, indent=1))
+    if figures:
+        from dashboard import figures as fig  # matplotlib only when figures are wanted
+        fig.experiment_figures(name, load_scenario(path), results, records, target)
+    return report
+
+
+class _Serial:
+    """A stand-in for a process pool when jobs == 1 (easier to debug and profile)."""
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return False
+
+    def submit(self, fn, *args):
+        result = fn(*args)
+
+        class Done:
+            def result(self):
+                return result
+        return Done()
+
+
+def _pool(jobs: int):
+    return _Serial() if jobs <= 1 else ProcessPoolExecutor(max_workers=jobs)
+
+
+def summary(name: str, results: dict[str, list[dict]]) -> dict:
+    out: dict = {}
+    for variant, runs in results.items():
+        clearance = [min(c for i, row in enumerate(r["min_clearance"]) for j, c in enumerate(row) if i != j) for r in runs]
+        out[variant] = {
+            "runs": len(runs),
+            "seeds_with_breach": sum(1 for r in runs if r["breaches"]),
+            "breaches": sum(len(r["breaches"]) for r in runs),
+            "min_clearance_m": round(min(clearance), 4),
+            "median_min_clearance_m": round(float(np.median(clearance)), 4),
+            "obstacle_min_clearance_m": round(min(r["obstacle_min_clearance"] for r in runs), 4),
+            "all_reached_goal": sum(1 for r in runs if all(r["reached_goal"])),
+            "makespan_median_s": _median([r["makespan_s"] for r in runs if r["makespan_s"] is not None]),
+            "inconsistency_mean": round(float(np.mean([r["inconsistency"] for r in runs])), 4),
+            "inconsistency_median": round(float(np.median([r["inconsistency"] for r in runs])), 4),
+            "replan_ms_median": _median([r["replan_ms_median"] for r in runs if r["replan_ms_median"] is not None]),
+        }
+        if runs and "liar_min_distance" in runs[0]:
+            liar = [d for r in runs for d in r["liar_min_distance"]]
+            separated = [r["trust_separated_at_s"] for r in runs]
+            out[variant] |= {
+                "liar_min_distance_median_m": round(float(np.median(liar)), 4),
+                "honest_trust_min_after_settle": round(min(r["honest_trust_min_after_settle"] for r in runs), 4),
+                "trust_gap_min_after_settle": round(min(r["trust_gap_min_after_settle"] for r in runs), 4),
+                "trust_separated_at_s_max": None if None in separated else round(max(separated), 2),
+            }
+    if "on" in out and "off" in out:
+        if "liar_min_distance_median_m" in out["on"]:
+            out["liar_distance_ratio"] = round(out["on"]["liar_min_distance_median_m"]
+                                               / out["off"]["liar_min_distance_median_m"], 3)
+        out["inconsistency_on_vs_off"] = [out["on"]["inconsistency_mean"], out["off"]["inconsistency_mean"]]
+        on_runs, off_runs = results["on"], results["off"]
+        out["inconsistency_lower_with_factor_in_seeds"] = sum(
+            1 for a, b in zip(on_runs, off_runs) if a["inconsistency"] < b["inconsistency"])
+    return out
+
+
+def _median(values: list[float]) -> float | None:
+    return round(float(np.median(values)), 3) if values else None
+
+
+# --- printing -------------------------------------------------------------------------------
+
+
+def print_table(report: dict, stream=sys.stdout) -> None:
+    name, s = report["experiment"], report["summary"]
+    print(f"\n== {name} ({report['scenario']}, {len(report['seeds'])} seeds): {report['question']}", file=stream)
+    cols = ["runs", "seeds_with_breach", "min_clearance_m", "obstacle_min_clearance_m", "all_reached_goal",
+            "makespan_median_s", "inconsistency_mean", "replan_ms_median"]
+    extra = ["liar_min_distance_median_m", "honest_trust_min_after_settle", "trust_gap_min_after_settle",
+             "trust_separated_at_s_max"]
+    variants = [v for v in report["variants"]]
+    if any(c in s[v] for v in variants for c in extra):
+        cols += extra
+    width = max(len(c) for c in cols)
+    print(f"{'':{width}}  " + "  ".join(f"{v:>10}" for v in variants), file=stream)
+    for c in cols:
+        print(f"{c:{width}}  " + "  ".join(f"{_fmt(s[v].get(c)):>10}" for v in variants), file=stream)
+    for key in ("liar_distance_ratio", "inconsistency_on_vs_off", "inconsistency_lower_with_factor_in_seeds"):
+        if key in s:
+            print(f"{key}: {s[key]}", file=stream)
+    if name == "lab":
+        for variant, label in (("A", "A (all honest)"), ("on", "B (car 1 at 40 %)")):
+            matrices = np.array([r["min_distance"] for r in report["variants"][variant]])
+            print(f"min distance matrix {label}, median over seeds (m):", file=stream)
+            print(np.array2string(np.median(matrices, axis=0), precision=2, suppress_small=True), file=stream)
+
+
+def _fmt(value) -> str:
+    if value is None:
+        return "-"
+    if isinstance(value, float):
+        return f"{value:.3f}"
+    return str(value)
+
+
+class Progress:
+    """One line per finished job, with a bar when stderr is a terminal."""
+
+    def __init__(self, label: str, total: int, stream=sys.stderr):
+        self.label, self.total, self.count, self.stream = label, total, 0, stream
+        self.started = time.perf_counter()
+        self.tty = stream.isatty()
+
+    def step(self, text: str) -> None:
+        self.count += 1
+        elapsed = time.perf_counter() - self.started
+        eta = elapsed / self.count * (self.total - self.count)
+        bar = "#" * int(20 * self.count / self.total)
+        line = f"[{self.label}] {self.count}/{self.total} [{bar:<20}] {elapsed:5.0f}s, ~{eta:4.0f}s left  {text}"
+        print(("\r" + line[:150].ljust(150)) if self.tty else line, end="" if self.tty else "\n",
+              file=self.stream, flush=True)
+
+    def done(self) -> None:
+        if self.tty:
+            print(file=self.stream)
+
+
+# --- command line ------------------------------------------------------------------------------
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="trustfg experiment", description=__doc__.split("\n")[0])
+    parser.add_argument("name", choices=[*EXPERIMENTS, "all"])
+    parser.add_argument("--seed", type=int, default=0, help="first seed (default 0)")
+    parser.add_argument("--seeds", type=int, default=20, help="number of seeds (default 20)")
+    parser.add_argument("--out", type=Path, default=None,
+                        help="output folder (default runs/experiment-<time>)")
+    parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
+                        help="parallel simulations (default: one per core)")
+    parser.add_argument("--scenario", default=None, help="scenario TOML instead of the experiment's own")
+    parser.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+    args = parser.parse_args(argv)
+    if args.seeds < 1:
+        parser.error("--seeds must be at least 1")
+    out = args.out or Path("runs") / time.strftime("experiment-%Y%m%d-%H%M%S")
+    names = list(EXPERIMENTS) if args.name == "all" else [args.name]
+    seeds = list(range(args.seed, args.seed + args.seeds))
+    for name in names:
+        report = run_experiment(name, seeds, out, args.jobs, args.scenario, figures=not args.no_figures)
+        print_table(report)
+    print(f"\nwrote {out.resolve()}")
+    return 0

@@ -1,0 +1,197 @@
+"""The fleet in one process: fast, deterministic per seed, with the real parts inside.
+
+Every car is a :class:`CarAgent` (the same planner and trust code the car process runs)
+driving a simulated unicycle (mocap_sim.vehicle) with the tracking controller of the
+bridge (bridge.tracking). Cars see each other through noisy pose observations and talk
+through the fleet message codec (agent.messages: msgpack bytes, decoded and filtered by
+an Inbox per receiver), with a fixed message latency. Time is simulated: a replan takes
+no simulated time, so a run is exactly repeatable from its seed.
+
+Per seed, each car draws a start delay in [0, start_delay_max_s], a cruise speed in
+cruise_speed_range_mps and a replanning phase, so that starts are desynchronised and,
+with avoidance off, conflicting routes really collide.
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from agent import messages
+from agent.car_agent import CarAgent
+from agent.config import Scenario
+from agent.world import build_sdf, SignedDistanceField
+from bridge.tracking import track
+from mocap_sim.vehicle import VehicleState, step as vehicle_step
+
+RECORD_TRUST_PERIOD_S = 0.1
+
+
+@dataclass
+class RunRecord:
+    """Everything a run produced, for metrics and figures."""
+
+    seed: int
+    car_ids: list[int]
+    radii: list[float]
+    times: np.ndarray
+    """(T,) simulated time of each recorded step."""
+    states: np.ndarray
+    """(T, n, 5): x, y, yaw, v, omega of each car (ground truth)."""
+    arrived_at: list[float | None]
+    depart_at: list[float]
+    trust_times: np.ndarray
+    trust: np.ndarray
+    """(T_trust, n, n): overall trust of truster (row) in trustee (column); diagonal 1."""
+    transparency: np.ndarray
+    """(T_trust, n, n): transparency trust, same layout."""
+    epsilon: np.ndarray
+    """(T_trust, n, n): safety distance each car keeps from each peer."""
+    replan_ms: list[list[float]]
+    counters: list[dict[str, int]]
+    inbox: list[dict[str, int]]
+    final_plans: list[tuple[np.ndarray, np.ndarray]] = field(default_factory=list)
+    plan_log: list = field(default_factory=list)
+    """(t, car index, Plan) of every replan, when simulate(keep_plans=True)."""
+
+
+def simulate(scenario: Scenario, seed: int, sdf: SignedDistanceField | None = None,
+             keep_plans: bool = False) -> RunRecord:
+    """Run the scenario to completion (every car at its goal) or to sim.timeout_s."""
+    sim = scenario.sim
+    sdf = sdf or build_sdf(scenario.world)
+    rng = np.random.default_rng(seed)
+    cars = list(scenario.cars)
+    n = len(cars)
+    ids = [c.id for c in cars]
+    depart = rng.uniform(0.0, sim.start_delay_max_s, n)
+    cruise = rng.uniform(*sim.cruise_speed_range_mps, n)
+    control = scenario.control
+    phase = rng.uniform(0.0, control.replan_period_s, n)
+    noise_rng = np.random.default_rng([seed, 7])
+
+    agents = [
+        CarAgent(car=c, scenario=scenario, sdf=sdf, depart_at=float(depart[i]),
+                 cruise_speed_mps=float(cruise[i]), rng=np.random.default_rng([seed, c.id]))
+        for i, c in enumerate(cars)
+    ]
+    inboxes = [messages.Inbox() for _ in cars]
+    vehicles = [VehicleState(c.start[0], c.start[1], _start_heading(c)) for c in cars]
+
+    queue: list[tuple[float, int, int, bytes]] = []  # (deliver_at, order, sender index, payload)
+    order = 0
+
+    def publish(sender: int, message: messages.Message, now: float) -> None:
+        nonlocal order
+        heapq.heappush(queue, (now + sim.message_latency_s, order, sender, messages.encode(message)))
+        order += 1
+
+    steps = int(math.ceil(sim.timeout_s / sim.step_s)) + 1
+    times, states = [], []
+    trust_times, trust_rows, transparency_rows, epsilon_rows = [], [], [], []
+    arrived: list[float | None] = [None] * n
+    plan_log: list = []
+    next_replan = phase.copy()
+    next_report = rng.uniform(0.0, control.trust_report_period_s, n)
+    next_trust_record = 0.0
+
+    for k in range(steps):
+        t = k * sim.step_s
+        # 1. Deliver due messages through each receiver's inbox (decode + order/replay filter).
+        while queue and queue[0][0] <= t + 1e-9:
+            _, _, sender, payload = heapq.heappop(queue)
+            for j, agent in enumerate(agents):
+                if j == sender:
+                    continue
+                message = inboxes[j].accept(payload, key_sender=ids[sender])
+                if message is not None:
+                    agent.receive(message, t)
+        # 2. Everyone sees everyone (mocap), with noise.
+        for i, state in enumerate(vehicles):
+            noisy = noise_rng.normal(0.0, sim.observation_noise_m, (n, 2))
+            for j, agent in enumerate(agents):
+                agent.observe(t, ids[i], state.x + noisy[j, 0], state.y + noisy[j, 1], state.yaw)
+        # 3. Evidence, replanning, reports.
+        for i, agent in enumerate(agents):
+            agent.gather_evidence(t)
+            if t + 1e-9 >= next_replan[i]:
+                next_replan[i] += control.replan_period_s
+                agent.replan(t)
+                if keep_plans and agent.plan is not None:
+                    plan_log.append((t, i, agent.plan))
+                outgoing = agent.plan_message(t)
+                if outgoing is not None:
+                    publish(i, outgoing, t)
+            if t + 1e-9 >= next_report[i]:
+                next_report[i] += control.trust_report_period_s
+                publish(i, agent.trust_message(t), t)
+        if t + 1e-9 >= next_trust_record:
+            next_trust_record += RECORD_TRUST_PERIOD_S
+            trust_times.append(t)
+            tr, tp, ep = _trust_snapshot(agents, ids, t)
+            trust_rows.append(tr)
+            transparency_rows.append(tp)
+            epsilon_rows.append(ep)
+        # 4. Record, then control and move.
+        times.append(t)
+        states.append([[s.x, s.y, s.yaw, s.v, s.omega] for s in vehicles])
+        for i, agent in enumerate(agents):
+            state = vehicles[i]
+            if arrived[i] is None and math.hypot(state.x - cars[i].goal[0], state.y - cars[i].goal[1]) <= sim.goal_tolerance_m:
+                arrived[i] = t
+            if t < depart[i] or agent.plan is None or agent.at_goal:
+                v_cmd, w_cmd = 0.0, 0.0
+            else:
+                own = agent.tracks[ids[i]].motion()
+                v_cmd, w_cmd = track(agent.plan, t, own.position[0], own.position[1], own.yaw,
+                                     scenario.tracking, scenario.vehicle)
+            vehicles[i] = vehicle_step(state, v_cmd, w_cmd, sim.step_s, scenario.vehicle)
+        if all(a is not None for a in arrived) and all(abs(s.v) < 1e-3 for s in vehicles):
+            break
+
+    return RunRecord(
+        seed=seed,
+        car_ids=ids,
+        radii=[c.radius_m for c in cars],
+        times=np.array(times),
+        states=np.array(states),
+        arrived_at=arrived,
+        depart_at=[float(d) for d in depart],
+        trust_times=np.array(trust_times),
+        trust=np.array(trust_rows),
+        transparency=np.array(transparency_rows),
+        epsilon=np.array(epsilon_rows),
+        replan_ms=[list(a.replan_ms) for a in agents],
+        counters=[dict(a.counters) | {f"trust_{k}": v for k, v in a.trust.counters.items()} for a in agents],
+        inbox=[dict(box.dropped) | {f"accepted_{k}": v for k, v in box.accepted.items()} for box in inboxes],
+        final_plans=[(a.plan.positions.copy(), a.plan.velocities.copy()) if a.plan is not None else
+                     (np.zeros((0, 2)), np.zeros((0, 2))) for a in agents],
+        plan_log=plan_log,
+    )
+
+
+def _trust_snapshot(agents: list[CarAgent], ids: list[int], t: float):
+    n = len(agents)
+    trust = np.ones((n, n))
+    transparency = np.ones((n, n))
+    epsilon = np.zeros((n, n))
+    for a, agent in enumerate(agents):
+        planner = agent.scenario.planner
+        for b, peer in enumerate(ids):
+            if a == b:
+                continue
+            tau = agent.trust.tau(peer, t)
+            trust[a, b] = float(np.min(tau))
+            transparency[a, b] = float(tau[2])
+            epsilon[a, b] = agent.trust.epsilon(peer, t, planner.epsilon_m, planner.transparency)
+    return trust, transparency, epsilon
+
+
+def _start_heading(car) -> float:
+    if car.start_heading_rad is not None:
+        return car.start_heading_rad
+    target = car.route[0] if car.route else car.goal
+    return math.atan2(target[1] - car.start[1], target[0] - car.start[0])
