@@ -1,0 +1,517 @@
+"""NatNet client: the sockets and the thread around the pure codec in :mod:`bridge.natnet`.
+
+Two pieces, as everywhere in trustfg:
+
+* :class:`FrameReceiver` is the logic and opens nothing: datagrams in (``handle``), frames
+  out. It decodes, counts (received, decoded, rejected by reason, frames dropped by gaps in
+  frame numbers, stale/out-of-order), keeps a latest-value slot per rigid body id and calls
+  an optional ``on_frame`` callback. Tests drive it with captured bytes.
+* :class:`NatNetClient` is the thin I/O layer, a context manager.
+
+Modes (``NatNetClientOptions.multicast``):
+
+* **Multicast** (Motive's default). The client joins ``multicast_group`` on the interface
+  ``local_address`` and receives on ``data_port`` (1511). The socket is bound with
+  SO_REUSEADDR and SO_REUSEPORT, so every car process on a host can bind the same port
+  and join the group, and each gets every datagram (the kernel delivers a multicast
+  datagram to every socket bound to the port; on POSIX the socket is bound to the group
+  address, so other groups on the same port stay out). If ``handshake`` is on, the client
+  first sends CONNECT to the server's command port (1510) from a short-lived socket and
+  learns the NatNet version from SERVERINFO; otherwise ``natnet_version`` must be set.
+* **Unicast.** One socket bound to an ephemeral port on ``local_address`` sends CONNECT to
+  the command port, waits for SERVERINFO (resending every ``connect_retry_s``; a clear
+  :class:`NatNetConnectionError` after ``connect_timeout_s``), then receives the frames
+  the server sends to that same address (as Motive and the SDK samples do: in unicast the
+  data arrive on the socket the client connected from) and sends KEEPALIVE every
+  ``keepalive_interval_s``. Several clients on one host each get every frame because each
+  has its own port and the server sends to every connected address. This socket is
+  deliberately *not* bound with SO_REUSEADDR/SO_REUSEPORT: sockets sharing a unicast port
+  would split the stream between them (Linux load-balances unicast datagrams over
+  SO_REUSEPORT sockets). When nothing arrives for ``reconnect_after_s``, CONNECT is sent
+  again (a restarted server forgets its clients).
+
+CONNECT announces the client as NatNet 4.1 (the newest layout the codec knows) and, if
+``requested_version`` is set, asks for that bitstream version in the connection options.
+
+One thread owns the receiving socket; the handshake runs before it starts, in the caller.
+Sockets always have timeouts, so ``close()`` stops and joins within a bounded time.
+"""
+
+from __future__ import annotations
+
+import logging
+import socket
+import sys
+import threading
+import time
+from collections import Counter
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Callable, Mapping
+
+from bridge import natnet
+from bridge.natnet import (ConnectRequest, Frame, MessageId, NatNetError, RigidBody, ServerInfo,
+                           Version, supports_frames)
+
+__all__ = ["NatNetClientOptions", "NatNetClient", "NatNetConnectionError", "FrameReceiver",
+           "BodySample", "NatNetStats"]
+
+log = logging.getLogger(__name__)
+
+_RECV_BYTES = 65536
+
+
+class NatNetConnectionError(ConnectionError):
+    """The client could not set up its link to the NatNet server (timeout, bad address, ...)."""
+
+
+@dataclass(frozen=True)
+class NatNetClientOptions:
+    """Where and how to listen. Ports and addresses as in Motive's streaming pane.
+
+    ``natnet_version`` pins the frame layout (e.g. ``Version(3, 0)``); None learns it from
+    SERVERINFO. ``requested_version`` is sent in CONNECT to ask the server for a bitstream
+    version (NatNet 4 servers may honour it).
+    """
+
+    server_address: str = "127.0.0.1"
+    command_port: int = 1510
+    multicast: bool = True
+    multicast_group: str = "239.255.42.99"
+    data_port: int = 1511
+    local_address: str = "0.0.0.0"
+    handshake: bool = True
+    natnet_version: Version | None = None
+    requested_version: Version | None = None
+    client_name: str = "trustfg"
+    connect_timeout_s: float = 3.0
+    connect_retry_s: float = 0.5
+    keepalive_interval_s: float = 1.0
+    reconnect_after_s: float = 3.0
+    poll_timeout_s: float = 0.05
+    close_timeout_s: float = 2.0
+    receive_buffer_bytes: int = 1 << 20
+    frame_restart_threshold: int = 600
+
+    def __post_init__(self) -> None:
+        if self.multicast and not self.handshake and self.natnet_version is None:
+            raise ValueError("multicast without handshake needs natnet_version")
+        for name in ("connect_timeout_s", "connect_retry_s", "keepalive_interval_s",
+                     "reconnect_after_s", "poll_timeout_s", "close_timeout_s"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name} must be > 0")
+
+
+@dataclass(frozen=True)
+class BodySample:
+    """The latest report of one rigid body. ``received_s`` is ``time.monotonic()``."""
+
+    body: RigidBody
+    frame_number: int
+    timestamp: float
+    received_s: float
+
+
+@dataclass(frozen=True)
+class NatNetStats:
+    received: int = 0  # datagrams
+    decoded: int = 0  # frames accepted
+    rejected: Mapping[str, int] = field(default_factory=dict)  # datagrams, by reason
+    dropped: int = 0  # frames missing from the sequence of frame numbers
+    other: int = 0  # non-frame messages (SERVERINFO, responses, ...)
+    callback_errors: int = 0
+    last_frame_number: int | None = None
+
+    @property
+    def rejected_total(self) -> int:
+        return sum(self.rejected.values())
+
+
+class FrameReceiver:
+    """Client logic: decode datagrams, count, keep the latest sample of each rigid body.
+
+    ``handle`` is called by one thread (the socket's); the readers (``latest``, ``stats``,
+    ``wait_for_frames``) may be called from any thread. A frame number lower than the last
+    one is rejected as ``stale``, unless it is more than ``restart_threshold`` lower: then
+    the server restarted and the sequence starts over.
+    """
+
+    def __init__(self, version: Version | None, on_frame: Callable[[Frame], None] | None = None,
+                 *, pinned: bool = False, restart_threshold: int = 600) -> None:
+        self._version = version
+        self._pinned = pinned
+        self._on_frame = on_frame
+        self._restart_threshold = restart_threshold
+        self._cond = threading.Condition()
+        self._latest: dict[int, BodySample] = {}
+        self._rejected: Counter[str] = Counter()
+        self._received = self._decoded = self._dropped = self._other = 0
+        self._callback_errors = 0
+        self._last_frame: int | None = None
+        self.server_info: ServerInfo | None = None
+
+    @property
+    def version(self) -> Version | None:
+        return self._version
+
+    def handle(self, packet: bytes, received_s: float) -> Frame | None:
+        """Process one datagram; returns the frame if it was accepted."""
+        with self._cond:
+            self._received += 1
+        try:
+            message_id, payload = natnet.unpack_header(packet)
+            if message_id != MessageId.FRAMEOFDATA:
+                self._handle_other(message_id, payload)
+                return None
+            if self._version is None:
+                raise NatNetError("frame before the NatNet version is known", "no_version")
+            frame = natnet.decode_frame(payload, self._version)
+        except NatNetError as exc:
+            self._reject(exc.reason, str(exc))
+            return None
+        if not self._accept(frame, received_s):
+            return None
+        if self._on_frame is not None:
+            try:
+                self._on_frame(frame)
+            except Exception:  # the callback is user code; the socket thread must go on
+                with self._cond:
+                    self._callback_errors += 1
+                log.exception("NatNet on_frame callback failed on frame %d", frame.frame_number)
+        return frame
+
+    def _handle_other(self, message_id: int, payload: memoryview) -> None:
+        with self._cond:
+            self._other += 1
+        if message_id == MessageId.SERVERINFO:
+            info = natnet.decode_server_info(payload)
+            self.server_info = info
+            if not self._pinned and info.natnet_version != self._version \
+                    and supports_frames(info.natnet_version):
+                log.warning("NatNet server now streams version %s (was %s)",
+                            info.natnet_version, self._version)
+                self._version = info.natnet_version
+
+    def _reject(self, reason: str, message: str) -> None:
+        with self._cond:
+            self._rejected[reason] += 1
+            first = self._rejected[reason] == 1
+        log.log(logging.WARNING if first else logging.DEBUG,
+                "NatNet datagram rejected (%s): %s", reason, message)
+
+    def _accept(self, frame: Frame, received_s: float) -> bool:
+        number = frame.frame_number
+        with self._cond:
+            last = self._last_frame
+            if last is not None:
+                if number <= last and last - number <= self._restart_threshold:
+                    self._rejected["stale"] += 1
+                    return False
+                if number > last + 1:
+                    self._dropped += number - last - 1
+                elif number <= last:
+                    log.info("NatNet frame numbers restarted (%d after %d)", number, last)
+            self._last_frame = number
+            self._decoded += 1
+            for body in frame.rigid_bodies:
+                self._latest[body.id] = BodySample(body, number, frame.timestamp, received_s)
+            self._cond.notify_all()
+        return True
+
+    def latest(self, body_id: int) -> BodySample | None:
+        with self._cond:
+            return self._latest.get(body_id)
+
+    def latest_all(self) -> dict[int, BodySample]:
+        with self._cond:
+            return dict(self._latest)
+
+    def stats(self) -> NatNetStats:
+        with self._cond:
+            return NatNetStats(self._received, self._decoded,
+                               MappingProxyType(dict(self._rejected)), self._dropped,
+                               self._other, self._callback_errors, self._last_frame)
+
+    def wait_for_frames(self, count: int, timeout_s: float) -> bool:
+        """Block until ``count`` frames in total have been accepted, or the timeout passes."""
+        with self._cond:
+            return self._cond.wait_for(lambda: self._decoded >= count, timeout_s)
+
+
+def _reuse(sock: socket.socket) -> None:
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    if hasattr(socket, "SO_REUSEPORT"):
+        try:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEPORT, 1)
+        except OSError:  # defined but not supported by this kernel
+            pass
+
+
+def _receive_buffer(sock: socket.socket, nbytes: int) -> None:
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, nbytes)
+    except OSError as exc:
+        log.debug("could not set SO_RCVBUF to %d: %s", nbytes, exc)
+
+
+class NatNetClient:
+    """Receives NatNet frames in a background thread; see the module docstring.
+
+    ``on_frame`` runs on the socket thread and must not block (hand the frame to a queue).
+    Use as a context manager; ``start()`` raises :class:`NatNetConnectionError` when the
+    server does not answer or the sockets cannot be set up.
+    """
+
+    def __init__(self, options: NatNetClientOptions = NatNetClientOptions(),
+                 on_frame: Callable[[Frame], None] | None = None) -> None:
+        self.options = options
+        self._on_frame = on_frame
+        self._receiver: FrameReceiver | None = None
+        self._sock: socket.socket | None = None
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        self._server_info: ServerInfo | None = None
+
+    # -- lifecycle ---------------------------------------------------------------------
+    def __enter__(self) -> "NatNetClient":
+        return self.start()
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    def start(self) -> "NatNetClient":
+        if self._thread is not None:
+            raise RuntimeError("NatNetClient already started")
+        o = self.options
+        try:
+            if o.multicast:
+                if o.handshake:
+                    with self._command_socket() as cmd:
+                        self._server_info = self._handshake(cmd)
+                self._sock = self._multicast_socket()
+            else:
+                self._sock = self._command_socket()
+                try:
+                    self._server_info = self._handshake(self._sock)
+                except BaseException:
+                    self._sock.close()
+                    self._sock = None
+                    raise
+        except OSError as exc:
+            if isinstance(exc, NatNetConnectionError):
+                raise
+            raise NatNetConnectionError(f"cannot set up the NatNet sockets: {exc}") from exc
+        version = self._choose_version()
+        self._receiver = FrameReceiver(version, self._on_frame, pinned=o.natnet_version is not None,
+                                       restart_threshold=o.frame_restart_threshold)
+        self._receiver.server_info = self._server_info
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run, name="natnet-client", daemon=True)
+        self._thread.start()
+        log.info("NatNet client receiving %s NatNet %s on %s", "multicast" if o.multicast
+                 else "unicast", version, self.local_address)
+        return self
+
+    def close(self) -> None:
+        """Stop the thread (joined within ``close_timeout_s``) and close the socket."""
+        thread, self._thread = self._thread, None
+        self._stop.set()
+        if thread is not None:
+            thread.join(self.options.close_timeout_s)
+            if thread.is_alive():
+                log.error("NatNet client thread did not stop within %.1f s",
+                          self.options.close_timeout_s)
+        sock, self._sock = self._sock, None
+        if sock is not None:
+            if not self.options.multicast and self._server_info is not None:
+                try:  # polite: lets the server forget us at once
+                    sock.sendto(natnet.serialize(natnet.Disconnect()), self._server)
+                except OSError:
+                    pass
+            sock.close()
+
+    # -- readers -----------------------------------------------------------------------
+    @property
+    def server_info(self) -> ServerInfo | None:
+        """The latest SERVERINFO (from the handshake, or a later one on the socket)."""
+        if self._receiver is not None and self._receiver.server_info is not None:
+            return self._receiver.server_info
+        return self._server_info
+
+    @property
+    def version(self) -> Version | None:
+        return self._receiver.version if self._receiver else None
+
+    @property
+    def local_address(self) -> tuple[str, int] | None:
+        sock = self._sock
+        return sock.getsockname() if sock is not None else None
+
+    def latest(self, body_id: int) -> BodySample | None:
+        return self._receiver.latest(body_id) if self._receiver else None
+
+    def latest_all(self) -> dict[int, BodySample]:
+        return self._receiver.latest_all() if self._receiver else {}
+
+    def stats(self) -> NatNetStats:
+        return self._receiver.stats() if self._receiver else NatNetStats()
+
+    def wait_for_frames(self, count: int, timeout_s: float) -> bool:
+        """Block until ``count`` frames have been accepted since start (False on timeout)."""
+        if self._receiver is None:
+            raise RuntimeError("NatNetClient not started")
+        return self._receiver.wait_for_frames(count, timeout_s)
+
+    # -- sockets -----------------------------------------------------------------------
+    @property
+    def _server(self) -> tuple[str, int]:
+        return self.options.server_address, self.options.command_port
+
+    def _command_socket(self) -> socket.socket:
+        """A socket of our own on an ephemeral port: no SO_REUSE* (see the module docstring)."""
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            _receive_buffer(sock, self.options.receive_buffer_bytes)
+            sock.bind((self.options.local_address, 0))
+            sock.settimeout(self.options.poll_timeout_s)
+        except BaseException:
+            sock.close()
+            raise
+        return sock
+
+    def _multicast_socket(self) -> socket.socket:
+        o = self.options
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            _reuse(sock)
+            _receive_buffer(sock, o.receive_buffer_bytes)
+            # POSIX: bind to the group so only its datagrams arrive; Windows cannot.
+            sock.bind(("" if sys.platform == "win32" else o.multicast_group, o.data_port))
+            membership = socket.inet_aton(o.multicast_group) + socket.inet_aton(o.local_address)
+            sock.setsockopt(socket.IPPROTO_IP, socket.IP_ADD_MEMBERSHIP, membership)
+            sock.settimeout(o.poll_timeout_s)
+        except OSError as exc:
+            sock.close()
+            raise NatNetConnectionError(
+                f"cannot join multicast group {o.multicast_group}:{o.data_port} on interface "
+                f"{o.local_address}: {exc}") from exc
+        return sock
+
+    def _connect_packet(self) -> bytes:
+        o = self.options
+        return natnet.serialize(ConnectRequest(o.client_name, Version(0, 1), natnet.V4_1,
+                                               requested_version=o.requested_version))
+
+    def _handshake(self, sock: socket.socket) -> ServerInfo:
+        """CONNECT until SERVERINFO arrives; frames arriving meanwhile are dropped."""
+        o = self.options
+        packet = self._connect_packet()
+        start = time.monotonic()
+        deadline = start + o.connect_timeout_s
+        next_send = start
+        while True:
+            now = time.monotonic()
+            if now >= deadline:
+                raise NatNetConnectionError(
+                    f"no SERVERINFO from NatNet server {o.server_address}:{o.command_port} "
+                    f"within {o.connect_timeout_s:.1f} s (is it running, streaming "
+                    f"{'multicast' if o.multicast else 'unicast'}, and is the address right?)")
+            if now >= next_send:
+                sock.sendto(packet, self._server)
+                next_send = now + o.connect_retry_s
+            sock.settimeout(max(1e-3, min(next_send, deadline) - now))
+            try:
+                data, _ = sock.recvfrom(_RECV_BYTES)
+            except socket.timeout:
+                continue
+            except OSError as exc:  # e.g. ICMP port unreachable reported on Windows
+                log.debug("NatNet handshake: %s", exc)
+                continue
+            if natnet.peek_message_id(data) != MessageId.SERVERINFO:
+                continue
+            try:
+                info = natnet.decode_server_info(natnet.unpack_header(data)[1])
+            except NatNetError as exc:
+                log.warning("NatNet handshake: bad SERVERINFO: %s", exc)
+                continue
+            sock.settimeout(o.poll_timeout_s)
+            self._check_mode(info)
+            log.info("NatNet server %s %s, NatNet %s", info.app_name, info.app_version,
+                     info.natnet_version)
+            return info
+
+    def _check_mode(self, info: ServerInfo) -> None:
+        c, o = info.connection, self.options
+        if c is None:
+            return
+        if c.multicast != o.multicast:
+            raise NatNetConnectionError(
+                f"NatNet server streams {'multicast' if c.multicast else 'unicast'} but the "
+                f"client is configured for {'multicast' if o.multicast else 'unicast'}")
+        if o.multicast and (c.multicast_address, c.data_port) != (o.multicast_group, o.data_port):
+            log.warning("NatNet server announces %s:%d, client listens on %s:%d",
+                        c.multicast_address, c.data_port, o.multicast_group, o.data_port)
+
+    def _choose_version(self) -> Version:
+        o, info = self.options, self._server_info
+        if o.natnet_version is not None:
+            if info is not None and (info.natnet_version.major, info.natnet_version.minor) != (
+                    o.natnet_version.major, o.natnet_version.minor):
+                log.warning("NatNet server says version %s, using the configured %s",
+                            info.natnet_version, o.natnet_version)
+            version = o.natnet_version
+        else:
+            assert info is not None
+            version = info.natnet_version
+        if not supports_frames(version):
+            self._close_quietly()
+            raise NatNetConnectionError(
+                f"NatNet {version} frames are not supported (2.x, 3.0, 3.1, 4.0, 4.1 are); "
+                "set natnet_version or requested_version")
+        return version
+
+    def _close_quietly(self) -> None:
+        sock, self._sock = self._sock, None
+        if sock is not None:
+            sock.close()
+
+    # -- the socket thread ---------------------------------------------------------------
+    def _run(self) -> None:
+        o, sock, receiver = self.options, self._sock, self._receiver
+        assert sock is not None and receiver is not None
+        unicast = not o.multicast
+        keepalive = natnet.serialize(natnet.KeepAlive())
+        connect = self._connect_packet()
+        now = time.monotonic()
+        next_keepalive = now + o.keepalive_interval_s
+        last_rx = now
+        while not self._stop.is_set():
+            try:
+                data, _ = sock.recvfrom(_RECV_BYTES)
+            except socket.timeout:
+                data = None
+            except OSError as exc:
+                if self._stop.is_set():
+                    break
+                log.debug("NatNet receive: %s", exc)
+                data = None
+                self._stop.wait(o.poll_timeout_s)  # no busy loop on a persistent error
+            now = time.monotonic()
+            if data:
+                last_rx = now
+                try:
+                    receiver.handle(data, now)
+                except Exception:  # a bug must not kill the only thread that sees poses
+                    log.exception("NatNet client: failed to handle a datagram")
+            if unicast:
+                try:
+                    if now >= next_keepalive:
+                        sock.sendto(keepalive, self._server)
+                        next_keepalive = now + o.keepalive_interval_s
+                    if now - last_rx > o.reconnect_after_s:
+                        log.warning("NatNet: nothing received for %.1f s, reconnecting",
+                                    now - last_rx)
+                        sock.sendto(connect, self._server)
+                        last_rx = now
+                except OSError as exc:
+                    log.debug("NatNet send: %s", exc)

@@ -1,0 +1,66 @@
+"""Unicycle trajectory tracking: plan + measured pose -> (v, omega).
+
+The controller of Kanayama et al., "A stable tracking control method for an autonomous
+mobile robot" (ICRA 1990). With the reference pose (p_r, theta_r) and velocities
+(v_r, omega_r) of the plan at time t, and the error expressed in the car's frame
+
+    e_x =  cos(theta) dx + sin(theta) dy,    e_y = -sin(theta) dx + cos(theta) dy,
+    e_theta = wrap(theta_r - theta),          (dx, dy) = p_r - p
+
+the command is
+
+    v     = v_r cos(e_theta) + k_along e_x
+    omega = omega_r + v_r (k_cross e_y + k_heading sin(e_theta))
+
+with theta_r = atan2(v_ref), v_r = |v_ref| and omega_r = (v_x a_y - v_y a_x) / |v_ref|^2
+from the plan's velocity and acceleration. When the plan stands still (v_r ~ 0), the car
+turns towards the reference point and creeps to it, or stops once within
+``goal_tolerance_m``. Commands are clamped to the vehicle's limits; no reversing.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from agent.config import TrackingConfig, VehicleConfig
+from agent.gp import Plan
+
+STANDSTILL_MPS = 0.02
+
+
+def wrap(angle: float) -> float:
+    return math.atan2(math.sin(angle), math.cos(angle))
+
+
+def track(plan: Plan, t: float, x: float, y: float, yaw: float, gains: TrackingConfig,
+          limits: VehicleConfig) -> tuple[float, float]:
+    """The (v, omega) command that makes a car at (x, y, yaw) follow ``plan`` at time t."""
+    (p_ref,), (v_ref,) = plan.state_at(t)
+    (a_ref,) = plan.acceleration_at(t)
+    dx, dy = p_ref[0] - x, p_ref[1] - y
+    speed_ref = float(np.hypot(v_ref[0], v_ref[1]))
+    if speed_ref < STANDSTILL_MPS:
+        distance = math.hypot(dx, dy)
+        if distance < gains.goal_tolerance_m:
+            return 0.0, 0.0
+        heading_error = wrap(math.atan2(dy, dx) - yaw)
+        v = gains.k_along * distance * max(0.0, math.cos(heading_error))
+        omega = gains.k_heading * heading_error
+        return _clamp(v, omega, limits)
+    theta_ref = math.atan2(v_ref[1], v_ref[0])
+    omega_ref = (v_ref[0] * a_ref[1] - v_ref[1] * a_ref[0]) / speed_ref**2
+    c, s = math.cos(yaw), math.sin(yaw)
+    e_x = c * dx + s * dy
+    e_y = -s * dx + c * dy
+    e_theta = wrap(theta_ref - yaw)
+    v = speed_ref * math.cos(e_theta) + gains.k_along * e_x
+    omega = omega_ref + speed_ref * (gains.k_cross * e_y + gains.k_heading * math.sin(e_theta))
+    return _clamp(v, omega, limits)
+
+
+def _clamp(v: float, omega: float, limits: VehicleConfig) -> tuple[float, float]:
+    v = min(max(v, -limits.max_reverse_mps), limits.max_speed_mps)
+    omega = min(max(omega, -limits.max_turn_rate_radps), limits.max_turn_rate_radps)
+    return v, omega
