@@ -1,0 +1,275 @@
+"""The fault matrix: a 4-car ``trustfg sim`` with every car process in its own network
+namespace, under each fault, over several seeds.
+
+    sudo trustfg faults [--seeds K] [--cases NAME ...] [--out DIR]
+
+Cases (t = seconds after the start; car 2 is the victim where one car suffers):
+
+    baseline       no fault
+    loss-10/30/50  that % of every packet into every car's namespace dropped (nftables)
+    delay-50ms     every Zenoh link through a relay holding each chunk 50 +- 20 ms
+    partition      car 2 cut off from the other cars for t = 4..7 s, then healed
+    kill-restart   car 2's process SIGKILLed (once it drives, from t = 4 s), started again
+                   2 s later
+    mocap-drop-30  30 % of NatNet frames dropped (mocap-sim)
+    occlusion      car 2's rigid body untracked for 1 s (once it drives, from t = 4 s)
+    link-cut       car 2's command datagrams dropped from then to the end (nftables)
+
+Measured per run, from mocap-sim's ground truth and the recorded messages:
+
+    breaches          pairs with clearance < 0.1 m
+    goals             cars that reached their goal (a car whose link is cut cannot)
+    time_to_stop_s    from the fault being in place to the victim's car applying a zero
+                      command (the car process's STOP when its pose is invalid or 200 ms
+                      old, or the car's own 250 ms watchdog), from mocap-sim's command log
+                      at physics resolution (5 ms); standstill follows after braking
+                      (v / 1.5 m/s^2)
+    time_to_recover_s from the heal (or the restart) until every car's status reports a
+                      plan younger than 1 s from every peer: plans resynchronised
+    honest_trust_min  least trust any car still reports in any peer at the end: silence
+                      and loss must not read as lying
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import signal
+import dataclasses
+import json
+import socket
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from agent.config import dump_scenario, load_scenario
+from agent.launch import START_LEAD_S, RunContext, free_port, loopback_fleet, run
+from mocap_sim import netem
+
+SCENARIO = Path(__file__).resolve().parent.parent / "deploy" / "scenarios" / "intersection.toml"
+VICTIM = 2
+FRESH_PLAN_MS = 1000
+
+
+@dataclass
+class Case:
+    name: str
+    prepare: Callable[["Setup"], None] = lambda setup: None
+    """Change the fleet config or mocap-sim's arguments before the run."""
+    schedule: list[tuple[float, Callable[["Setup", RunContext], None]]] = field(default_factory=list)
+    measures_stop: bool = False
+    """The victim loses its pose, process or link ("fault:" event): time it takes to stop."""
+    measures_recovery: bool = False
+    """The victim rejoins ("heal:" event): time until plans are resynchronised."""
+    link_cut: bool = False
+
+
+@dataclass
+class Setup:
+    lab: netem.Lab
+    fleet: object
+    mocap_args: list[str]
+    control_port: int
+    killed_at: float | None = None
+
+    def control(self, command: dict) -> None:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            s.sendto(json.dumps(command).encode(), (self.lab.infra_ip, self.control_port))
+
+
+def _loss(percent: int) -> Case:
+    return Case(f"loss-{percent}", schedule=[(0.0, lambda s, c: [s.lab.loss(car, percent) for car in s.lab.car_ids])])
+
+
+def _delay(setup: Setup) -> None:
+    """Route every Zenoh link through a delaying relay; no gossip, so no short cuts."""
+    relays = []
+    for car in setup.fleet.cars:
+        host, port = car.listen[0][len("tcp/"):].rsplit(":", 1)
+        relay_host, relay_port = setup.lab.relay(host, int(port), 0.050, 0.020)
+        relays.append(f"tcp/{relay_host}:{relay_port}")
+    zenoh_file = Path(tempfile.mkdtemp(prefix="trustfg-delay-")) / "no-gossip.json5"
+    zenoh_file.write_text('{ scouting: { gossip: { enabled: false } } }\n')
+    setup.fleet = dataclasses.replace(setup.fleet, bus=dataclasses.replace(
+        setup.fleet.bus, connect=tuple(relays), zenoh_config=str(zenoh_file)))
+
+
+def when_moving(action: Callable[["Setup", RunContext], None]) -> Callable[["Setup", RunContext], float | None]:
+    """Run ``action`` once the victim is driving (a fault on a car that waits at its start
+    shows nothing); until then ask again in 0.1 s."""
+    def run_when_moving(setup: "Setup", context: RunContext) -> float | None:
+        if context.speed(VICTIM) < 0.15:
+            return 0.1
+        action(setup, context)
+        return None
+    return run_when_moving
+
+
+def _kill(setup: Setup, context: RunContext) -> None:
+    context.processes.kill(f"car {VICTIM}")
+    setup.killed_at = time.time()
+    context.note(f"fault: SIGKILL car {VICTIM}")
+
+
+def _restart(setup: Setup, context: RunContext) -> float | None:
+    if setup.killed_at is None or time.time() < setup.killed_at + 2.0:
+        return 0.1  # two seconds after the kill
+    context.note(f"heal: restart car {VICTIM}")
+    context.processes.start(f"car {VICTIM}", context.car_args(VICTIM), context.out / f"car_{VICTIM}.log")
+    return None
+
+
+def _link_port(setup: Setup) -> int:
+    car = next(c for c in setup.fleet.cars if c.id == VICTIM)
+    return int(car.link.rsplit(":", 1)[1])
+
+
+CASES = {case.name: case for case in [
+    Case("baseline"),
+    _loss(10), _loss(30), _loss(50),
+    Case("delay-50ms", prepare=_delay),
+    Case("partition", schedule=[(4.0, lambda s, c: (c.note(f"fault: partition car {VICTIM}"), s.lab.partition(VICTIM))),
+                                (7.0, lambda s, c: (c.note(f"heal: car {VICTIM} rejoins"), s.lab.clear(VICTIM)))],
+         measures_recovery=True),
+    Case("kill-restart", schedule=[(4.0, when_moving(_kill)), (6.0, _restart)], measures_stop=True,
+         measures_recovery=True),
+    Case("mocap-drop-30", prepare=lambda s: s.mocap_args.append("--drop-rate=0.3")),
+    Case("occlusion", schedule=[(4.0, when_moving(lambda s, c: (
+        s.control({"occlude": VICTIM, "seconds": 1.0}), c.note(f"fault: occlude car {VICTIM} for 1 s"))))],
+        measures_stop=True),
+    Case("link-cut", schedule=[(4.0, when_moving(lambda s, c: (
+        s.lab.cut_link(VICTIM, _link_port(s)), c.note(f"fault: cut car {VICTIM}'s command link"))))],
+        measures_stop=True, link_cut=True),
+]}
+
+
+def run_case(case: Case, seed: int, out: Path) -> dict:
+    """One run of one case; returns its row of measurements."""
+    scenario = load_scenario(SCENARIO)
+    ids = [c.id for c in scenario.cars]
+    with netem.Lab(ids) as lab:
+        fleet = loopback_fleet(scenario, None, None, 0.0, infra_ip=lab.infra_ip, car_ips=lab.car_ips())
+        setup = Setup(lab, fleet, [], free_port(socket.SOCK_DGRAM))
+        case.prepare(setup)
+        setup.mocap_args.append(f"--control-port={setup.control_port}")
+        schedule = [(t, (lambda action: lambda context: action(setup, context))(action)) for t, action in case.schedule]
+        timeout = 40.0 if case.link_cut else None
+        summary = run(setup.fleet, out, seed=seed, timeout_s=timeout, mocap_args=tuple(setup.mocap_args),
+                      wrap=lab.wrap, schedule=schedule, infra_ip=lab.infra_ip)
+    return measure(case, summary, out)
+
+
+def measure(case: Case, summary: dict, out: Path) -> dict:
+    ids = summary["car_ids"]
+    t_go = _t_go(out)
+    row = {
+        "case": case.name, "breaches": len(summary["breaches"]),
+        "goals": sum(summary["reached_goal"]), "cars": len(ids), "crashed": summary["crashed"],
+        "time_to_stop_s": None, "time_to_recover_s": None,
+        "honest_trust_min": min((v for r in summary["trust"] for v in r if v is not None), default=None),
+    }
+    events = summary.get("events", [])
+    fault = next((t for t, what in events if what.startswith("fault:")), None)
+    heal = next((t for t, what in events if what.startswith("heal:")), None)
+    row["fault_at_s"], row["heal_at_s"] = fault, heal
+    if case.measures_stop and fault is not None and t_go is not None:
+        row["time_to_stop_s"] = _time_to_stop(out / "commands.csv", VICTIM, t_go + fault)
+    if case.measures_recovery and heal is not None and t_go is not None:
+        row["time_to_recover_s"] = _time_to_recover(out / "messages.jsonl", ids, t_go + heal)
+    return row
+
+
+def _t_go(out: Path) -> float | None:
+    """The go time of the run (the events' clock): when its start message was sent."""
+    with open(out / "messages.jsonl") as f:
+        for line in f:
+            if '"kind": "start"' in line and '"message"' in line:
+                return json.loads(line)["message"]["stamp"] + START_LEAD_S
+    return None
+
+
+def _time_to_stop(commands: Path, car: int, onset: float) -> float | None:
+    """From the fault until the car applies a zero command (mocap-sim's command log, at
+    physics resolution); None if it was already stopped."""
+    with open(commands, newline="") as f:
+        rows = [(float(r["t"]), float(r["v_cmd"]), float(r["omega_cmd"])) for r in csv.DictReader(f)
+                if int(r["car_id"]) == car]
+    before = [r for r in rows if r[0] < onset]
+    if not before or (before[-1][1] == 0.0 and before[-1][2] == 0.0):
+        return None
+    after = [r for r in rows if r[0] >= onset and r[1] == 0.0 and r[2] == 0.0]
+    return round(after[0][0] - onset, 3) if after else float("inf")
+
+
+def _time_to_recover(messages_path: Path, ids: list[int], heal: float) -> float | None:
+    """From the heal until every car has had a fresh plan from every peer."""
+    fresh: dict[int, bool] = {}
+    with open(messages_path) as f:
+        for line in f:
+            record = json.loads(line)
+            if record.get("kind") != "status" or "message" not in record or record["t"] < heal:
+                continue
+            message = record["message"]
+            ages = [message["counters"].get(f"plan_age_ms_{peer}") for peer in ids if peer != message["id"]]
+            fresh[message["id"]] = all(a is not None and a < FRESH_PLAN_MS for a in ages)
+            if len(fresh) == len(ids) and all(fresh.values()):
+                return round(record["t"] - heal, 3)
+    return None
+
+
+def table(rows: list[dict]) -> str:
+    """fault, runs, breaches, goals reached, max time to stop, max time to recover."""
+    by_case: dict[str, list[dict]] = {}
+    for row in rows:
+        by_case.setdefault(row["case"], []).append(row)
+    lines = ["| fault | runs | breaches | goals reached | max time to stop (s) | max time to recover (s) "
+             "| least trust reported | crashed |", "| --- | --- | --- | --- | --- | --- | --- | --- |"]
+    for name, group in by_case.items():
+        stops = [r["time_to_stop_s"] for r in group if r["time_to_stop_s"] is not None]
+        recovers = [r["time_to_recover_s"] for r in group]
+        trust = [r["honest_trust_min"] for r in group if r["honest_trust_min"] is not None]
+        if not CASES[name].measures_recovery:
+            recover = "-"
+        else:
+            recover = "never" if None in recovers else f"{max(recovers):.2f}"
+        cells = [name, len(group), sum(r["breaches"] for r in group),
+                 f"{sum(r['goals'] for r in group)}/{sum(r['cars'] for r in group)}",
+                 f"{max(stops):.3f}" if stops else "-", recover,
+                 f"{min(trust):.2f}" if trust else "-", sum(len(r["crashed"]) for r in group)]
+        lines.append("| " + " | ".join(map(str, cells)) + " |")
+    return "\n".join(lines)
+
+
+def _interrupt(signum, frame) -> None:
+    raise KeyboardInterrupt
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="trustfg faults", description=__doc__.split("\n")[0],
+                                     epilog="Needs root: network namespaces and nftables.")
+    parser.add_argument("--seeds", type=int, default=3, help="runs per case (seeds 0..K-1)")
+    parser.add_argument("--cases", nargs="+", choices=list(CASES), default=list(CASES))
+    parser.add_argument("--out", type=Path, default=None, help="folder for the runs (default runs/faults-<time>)")
+    args = parser.parse_args(argv)
+    reason = netem.available()
+    if reason:
+        print(f"trustfg faults: {reason}", file=sys.stderr)
+        return 2
+    out = args.out or Path("runs") / time.strftime("faults-%Y%m%d-%H%M%S")
+    # SIGTERM unwinds like Ctrl-C, so every namespace, rule and process is removed.
+    signal.signal(signal.SIGTERM, _interrupt)
+    rows = []
+    for name in args.cases:
+        for seed in range(args.seeds):
+            print(f"[faults] {name} seed {seed} ...", file=sys.stderr, flush=True)
+            row = run_case(CASES[name], seed, out / f"{name}-{seed}")
+            print(f"[faults] {name} seed {seed}: {row}", file=sys.stderr, flush=True)
+            rows.append(row)
+    (out / "faults.json").write_text(json.dumps(rows, indent=1))
+    print(table(rows))
+    return 0

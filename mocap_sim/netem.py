@@ -1,0 +1,249 @@
+"""Network impairments for the fault suite: namespaces, nftables, a delaying relay.
+
+This machine's kernel has no traffic-control qdiscs (``tc ... netem`` answers "qdisc kind
+is unknown"), so faults are made with what it has:
+
+* every car process runs in its own network namespace, joined to the root namespace by a
+  veth pair on a bridge (``10.77.X.1`` the root side, where mocap-sim and the observers
+  live; ``10.77.X.(10+N)`` car N);
+* random loss is an nftables ``numgen random`` drop rule on the car namespace's input
+  hook; a partition drops everything between one car and the other cars; a cut command
+  link drops the car's UDP commands on their way out;
+* delay is a userspace TCP relay in the path of the Zenoh links: every chunk is held for a
+  random time (50 +- 20 ms by default) but never overtakes the one before it.
+
+Everything needs root (``ip netns``, nftables); :func:`available` says whether we have it.
+A :class:`Lab` is a context manager that removes every namespace, link, rule and relay
+it made, also when a test fails.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import os
+import random
+import secrets
+import shutil
+import subprocess
+import threading
+import time
+from dataclasses import dataclass, field
+
+log = logging.getLogger(__name__)
+
+TABLE = "trustfg"
+
+
+def available() -> str | None:
+    """None if namespaces and nftables can be used here, else why not."""
+    if os.geteuid() != 0:
+        return "network namespaces and nftables need root"
+    for tool in ("ip", "nft"):
+        if shutil.which(tool) is None:
+            return f"{tool} is not installed (tests/setup-system.sh installs it)"
+    return None
+
+
+def sh(*argv: str, stdin: str | None = None, check: bool = True) -> subprocess.CompletedProcess:
+    done = subprocess.run(argv, input=stdin, capture_output=True, text=True)
+    if check and done.returncode != 0:
+        raise RuntimeError(f"{' '.join(argv)}: {done.stderr.strip() or done.returncode}")
+    return done
+
+
+@dataclass
+class Lab:
+    car_ids: list[int]
+    tag: str = field(default_factory=lambda: secrets.token_hex(2))
+    subnet: int = field(default_factory=lambda: random.randint(100, 250))
+
+    def __post_init__(self) -> None:
+        self.bridge = f"tfg{self.tag}br"
+        self.infra_ip = f"10.77.{self.subnet}.1"
+        self.created: list[tuple[str, str]] = []
+        self.relays: list[DelayRelay] = []
+
+    def ns(self, car_id: int) -> str:
+        return f"tfg{self.tag}c{car_id}"
+
+    def car_ip(self, car_id: int) -> str:
+        return f"10.77.{self.subnet}.{10 + car_id}"
+
+    def car_ips(self) -> dict[int, str]:
+        return {car: self.car_ip(car) for car in self.car_ids}
+
+    # --- lifecycle ---------------------------------------------------------------------
+
+    def __enter__(self) -> "Lab":
+        try:
+            sh("ip", "link", "add", self.bridge, "type", "bridge")
+            self.created.append(("link", self.bridge))
+            sh("ip", "addr", "add", f"{self.infra_ip}/24", "dev", self.bridge)
+            sh("ip", "link", "set", self.bridge, "up")
+            for car in self.car_ids:
+                ns, host, inner = self.ns(car), f"tfg{self.tag}h{car}", f"tfg{self.tag}i{car}"
+                sh("ip", "netns", "add", ns)
+                self.created.append(("netns", ns))
+                sh("ip", "link", "add", host, "type", "veth", "peer", "name", inner)
+                self.created.append(("link", host))
+                sh("ip", "link", "set", inner, "netns", ns)
+                sh("ip", "link", "set", host, "master", self.bridge)
+                sh("ip", "link", "set", host, "up")
+                sh("ip", "netns", "exec", ns, "ip", "addr", "add", f"{self.car_ip(car)}/24", "dev", inner)
+                sh("ip", "netns", "exec", ns, "ip", "link", "set", inner, "up")
+                sh("ip", "netns", "exec", ns, "ip", "link", "set", "lo", "up")
+        except Exception:
+            self.__exit__(None, None, None)
+            raise
+        return self
+
+    def __exit__(self, *exc) -> None:
+        for relay in self.relays:
+            relay.close()
+        for kind, name in reversed(self.created):
+            if kind == "netns":
+                sh("ip", "netns", "del", name, check=False)
+            else:
+                sh("ip", "link", "del", name, check=False)
+        self.created.clear()
+
+    def wrap(self, name: str, argv: list[str]) -> list[str]:
+        """Start car processes inside their namespaces; everything else stays put."""
+        if name.startswith("car "):
+            return ["ip", "netns", "exec", self.ns(int(name.split()[1])), *argv]
+        return argv
+
+    # --- faults ------------------------------------------------------------------------
+
+    def _nft(self, car: int, rules: str) -> None:
+        sh("ip", "netns", "exec", self.ns(car), "nft", "-f", "-", stdin=rules)
+
+    def clear(self, car: int) -> None:
+        sh("ip", "netns", "exec", self.ns(car), "nft", "delete", "table", "inet", TABLE, check=False)
+
+    def loss(self, car: int, percent: int) -> None:
+        """Drop ``percent`` % of every packet that arrives in car's namespace."""
+        self.clear(car)
+        self._nft(car, f"""table inet {TABLE} {{
+  chain input {{
+    type filter hook input priority 0; policy accept;
+    iifname "lo" accept
+    numgen random mod 100 < {int(percent)} counter drop
+  }}
+}}""")
+
+    def partition(self, car: int) -> None:
+        """Cut car off from the other cars (it still sees the mocap and drives its car)."""
+        others = ", ".join(self.car_ip(c) for c in self.car_ids if c != car)
+        self.clear(car)
+        self._nft(car, f"""table inet {TABLE} {{
+  chain input {{
+    type filter hook input priority 0; policy accept;
+    ip saddr {{ {others} }} counter drop
+  }}
+  chain output {{
+    type filter hook output priority 0; policy accept;
+    ip daddr {{ {others} }} counter drop
+  }}
+}}""")
+
+    def cut_link(self, car: int, port: int) -> None:
+        """Drop car's command datagrams on their way to its car."""
+        self.clear(car)
+        self._nft(car, f"""table inet {TABLE} {{
+  chain output {{
+    type filter hook output priority 0; policy accept;
+    udp dport {int(port)} counter drop
+  }}
+}}""")
+
+    def relay(self, target_host: str, target_port: int, delay_s: float, jitter_s: float) -> tuple[str, int]:
+        """A delaying TCP relay in the root namespace in front of target; its address."""
+        relay = DelayRelay(self.infra_ip, (target_host, target_port), delay_s, jitter_s)
+        relay.start()
+        self.relays.append(relay)
+        return relay.address
+
+
+class DelayRelay:
+    """A TCP relay that holds every chunk for delay +- jitter seconds, in order."""
+
+    def __init__(self, host: str, target: tuple[str, int], delay_s: float, jitter_s: float, seed: int = 0):
+        self.host = host
+        self.target = target
+        self.delay_s = delay_s
+        self.jitter_s = jitter_s
+        self.rng = random.Random(seed)
+        self.address: tuple[str, int] = (host, 0)
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._thread: threading.Thread | None = None
+        self._ready = threading.Event()
+        self._server = None
+        self.chunks = 0
+
+    def start(self) -> None:
+        self._thread = threading.Thread(target=self._run, name="delay-relay", daemon=True)
+        self._thread.start()
+        if not self._ready.wait(5):
+            raise RuntimeError("the delay relay did not start")
+
+    def _run(self) -> None:
+        self._loop = asyncio.new_event_loop()
+        asyncio.set_event_loop(self._loop)
+        self._server = self._loop.run_until_complete(asyncio.start_server(self._serve, self.host, 0))
+        self.address = self._server.sockets[0].getsockname()[:2]
+        self._ready.set()
+        try:
+            self._loop.run_forever()
+        finally:
+            self._server.close()
+            for task in asyncio.all_tasks(self._loop):
+                task.cancel()
+            with contextlib.suppress(Exception):
+                self._loop.run_until_complete(asyncio.sleep(0))
+            self._loop.close()
+
+    async def _serve(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        try:
+            up_reader, up_writer = await asyncio.open_connection(*self.target)
+        except OSError:
+            writer.close()
+            return
+        await asyncio.gather(self._pump(reader, up_writer), self._pump(up_reader, writer),
+                             return_exceptions=True)
+
+    async def _pump(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        queue: asyncio.Queue = asyncio.Queue()
+
+        async def release() -> None:
+            while True:
+                due, data = await queue.get()
+                if data is None:
+                    break
+                wait = due - time.monotonic()
+                if wait > 0:
+                    await asyncio.sleep(wait)
+                writer.write(data)
+                await writer.drain()
+
+        sender = asyncio.create_task(release())
+        last_due = 0.0
+        try:
+            while data := await reader.read(65536):
+                delay = max(0.0, self.rng.uniform(self.delay_s - self.jitter_s, self.delay_s + self.jitter_s))
+                last_due = max(last_due, time.monotonic() + delay)  # never overtake the chunk before
+                self.chunks += 1
+                queue.put_nowait((last_due, data))
+        finally:
+            queue.put_nowait((0.0, None))
+            with contextlib.suppress(Exception):
+                await sender
+            writer.close()
+
+    def close(self) -> None:
+        if self._loop is not None and self._loop.is_running():
+            self._loop.call_soon_threadsafe(self._loop.stop)
+        if self._thread is not None:
+            self._thread.join(5)
