@@ -1,0 +1,491 @@
+"""``trustfg sim``: the main job -- a whole fleet as separate OS processes on one machine.
+
+    trustfg sim [--scenario FILE] [--cars N] [--liar ID --misinformation P] [--out DIR]
+                [--seed S] [--timeout S] [--natnet-version V] [--mocap ARG ...]
+
+1. Resolves a fleet config for loopback: a free UDP port per car link and for NatNet
+   (unicast), a free TCP port per process for Zenoh (explicit endpoints, multicast
+   scouting off), and writes it to DIR/fleet.toml.
+2. Starts ``trustfg mocap-sim`` (simulated cars + NatNet server) and waits for READY,
+   then one ``trustfg car`` process per car, each in its own process group.
+3. Joins the bus as an observer, waits until every car is alive, and sends the start
+   message: per car a departure time (desynchronised, drawn from ``--seed``) and a
+   cruise speed -- the same distributions as the in-process simulation.
+4. Records every fleet message to DIR/messages.jsonl until every car reports it is at
+   its goal, or the timeout.
+5. Stops every process (SIGTERM, then SIGKILL after a grace period) -- also on Ctrl-C --
+   and prints and writes DIR/summary.json: the RUN keys of the experiments computed
+   from mocap-sim's ground truth (DIR/ground_truth.csv), plus ``replan_ms`` per car,
+   ``messages`` counts, ``control`` (command rate and jitter per car) and ``crashed``.
+
+Exit status: 0 when every car arrived with no breach and no process crashed; 1 otherwise.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import csv
+import dataclasses
+import json
+import logging
+import os
+import select
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from collections import Counter, defaultdict, deque
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from agent import messages, metrics
+from agent.bus import FleetBus
+from agent.cli import stop_on_signals
+from agent.config import ConfigError, Scenario, dump_scenario, load_scenario
+from agent.world import build_sdf
+from dashboard.recording import convert_run
+
+log = logging.getLogger(__name__)
+
+SCENARIOS = Path(__file__).resolve().parent.parent / "deploy" / "scenarios"
+READY_TIMEOUT_S = 30.0
+GRACE_S = 5.0
+START_LEAD_S = 1.0
+
+
+def free_port(kind: int = socket.SOCK_STREAM) -> int:
+    with socket.socket(socket.AF_INET, kind) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def default_scenario(cars: int | None) -> Path:
+    if cars is not None and cars > 4:
+        return SCENARIOS / "intersection-8.toml"
+    return SCENARIOS / "intersection.toml"
+
+
+def loopback_fleet(scenario: Scenario, cars: int | None, liar: int | None, misinformation: float,
+                   infra_ip: str = "127.0.0.1", car_ips: dict[int, str] | None = None) -> Scenario:
+    """The scenario wired for one machine: ports, endpoints, unicast NatNet.
+
+    mocap-sim and the observers live at ``infra_ip``; car N's process at ``car_ips[N]``
+    (default: the same address) -- the fault tests give each its own network namespace."""
+    chosen = scenario.cars if cars is None else scenario.cars[:cars]
+    if cars is not None and len(chosen) < cars:
+        raise ConfigError(f"the scenario has {len(scenario.cars)} cars, {cars} were asked for")
+    if liar is not None and liar not in [c.id for c in chosen]:
+        raise ConfigError(f"--liar {liar}: no such car among {[c.id for c in chosen]}")
+    wired = []
+    for car in chosen:
+        lie = car.id == liar
+        ip = (car_ips or {}).get(car.id, infra_ip)
+        wired.append(dataclasses.replace(
+            car, link=f"udp://{infra_ip}:{free_port(socket.SOCK_DGRAM)}",
+            listen=(f"tcp/{ip}:{free_port()}",),
+            misinformation=misinformation if lie else car.misinformation,
+            false_testimony=lie or car.false_testimony))
+    endpoints = tuple(e for car in wired for e in car.listen)
+    return dataclasses.replace(
+        scenario, cars=tuple(wired),
+        bus=dataclasses.replace(scenario.bus, mode="peer", listen=(), connect=endpoints, multicast_scouting=False),
+        natnet=dataclasses.replace(scenario.natnet, server=infra_ip, mode="unicast",
+                                   command_port=free_port(socket.SOCK_DGRAM), data_port=free_port(socket.SOCK_DGRAM),
+                                   local_interface="0.0.0.0"))
+
+
+class Processes:
+    """Child processes, each in its own session; stopped for sure on exit."""
+
+    def __init__(self, wrap: Callable[[str, list[str]], list[str]] | None = None) -> None:
+        self.children: dict[str, subprocess.Popen] = {}
+        self.killed: set[str] = set()
+        self.wrap = wrap or (lambda name, argv: argv)
+
+    def start(self, name: str, args: list[str], log_path: Path, stdout=None) -> subprocess.Popen:
+        log_file = open(log_path, "a")
+        argv = self.wrap(name, [sys.executable, "-m", "agent.cli", *args])
+        process = subprocess.Popen(argv, stdout=stdout or log_file, stderr=log_file, start_new_session=True, text=True)
+        log_file.close()
+        self.children[name] = process
+        return process
+
+    def stop(self, names: list[str] | None = None) -> None:
+        names = list(self.children) if names is None else names
+        for name in names:
+            process = self.children[name]
+            if process.poll() is None:
+                try:
+                    os.killpg(process.pid, signal.SIGTERM)
+                except ProcessLookupError:
+                    pass
+        deadline = time.monotonic() + GRACE_S
+        for name in names:
+            process = self.children[name]
+            try:
+                process.wait(timeout=max(0.1, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                log.warning("%s did not stop within %.0f s; killing it", name, GRACE_S)
+                try:
+                    os.killpg(process.pid, signal.SIGKILL)
+                except ProcessLookupError:
+                    pass
+                process.wait(timeout=5)
+            if process.stdout:
+                process.stdout.close()
+
+    def kill(self, name: str) -> None:
+        """SIGKILL a child (a fault to inject): it is not counted as crashed."""
+        self.killed.add(name)
+        process = self.children[name]
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(process.pid, signal.SIGKILL)
+        process.wait(timeout=5)
+
+    def crashed(self) -> list[str]:
+        """Children that exited on their own with an error (before we stopped them)."""
+        return [name for name, p in self.children.items()
+                if p.poll() not in (None, 0) and not (name in self.killed and p.returncode == -signal.SIGKILL)]
+
+
+class Recorder:
+    """The observer on the bus: records every message, keeps what the summary needs."""
+
+    def __init__(self, bus: FleetBus, path: Path):
+        self.bus = bus
+        self.inbox = messages.Inbox()
+        self.file = open(path, "w")
+        self.counts: Counter = Counter()
+        self.per_sender: dict[int, Counter] = defaultdict(Counter)
+        self.status: dict[int, messages.StatusMessage] = {}
+        self.trust: dict[int, messages.TrustReport] = {}
+        self.poses: dict[int, deque] = defaultdict(lambda: deque(maxlen=2))
+        """The last two poses each car published (its speed, for fault schedules)."""
+
+    def poll(self) -> None:
+        for received in self.bus.drain():
+            message = self.inbox.accept(received.payload, key_sender=received.sender)
+            record = {"t": round(received.at, 4), "sender": received.sender, "kind": received.kind}
+            if message is None:
+                record["dropped"] = True
+            else:
+                record["message"] = messages.to_dict(message)
+                self.counts[received.kind] += 1
+                self.per_sender[received.sender][received.kind] += 1
+                if isinstance(message, messages.StatusMessage):
+                    self.status[message.sender] = message
+                elif isinstance(message, messages.PoseMessage) and message.valid:
+                    self.poses[message.sender].append(message)
+                elif isinstance(message, messages.TrustReport):
+                    self.trust[message.sender] = message
+            self.file.write(json.dumps(record) + "\n")
+
+    def close(self) -> None:
+        self.file.close()
+
+
+def departures(scenario: Scenario, seed: int, t_go: float) -> dict[int, tuple[float, float]]:
+    """Desynchronised departures, as agent.fleet_sim draws them for the same seed."""
+    rng = np.random.default_rng(seed)
+    n = len(scenario.cars)
+    delay = rng.uniform(0.0, scenario.sim.start_delay_max_s, n)
+    cruise = rng.uniform(*scenario.sim.cruise_speed_range_mps, n)
+    return {car.id: (t_go + float(delay[i]), float(cruise[i])) for i, car in enumerate(scenario.cars)}
+
+
+@dataclass
+class RunContext:
+    """What a scheduled fault action may touch while a run goes on."""
+
+    scenario: Scenario
+    out: Path
+    processes: Processes
+    config_path: Path
+    t_go: float
+    recorder: "Recorder | None" = None
+    events: list[tuple[float, str]] = field(default_factory=list)
+
+    def speed(self, car_id: int) -> float:
+        """The car's speed as its last two published poses tell (0 if unknown)."""
+        poses = self.recorder.poses.get(car_id, ()) if self.recorder else ()
+        if len(poses) < 2 or poses[1].stamp <= poses[0].stamp:
+            return 0.0
+        a, b = poses
+        return float(np.hypot(b.x - a.x, b.y - a.y) / (b.stamp - a.stamp))
+
+    def car_args(self, car_id: int) -> list[str]:
+        return ["car", "--id", str(car_id), "--config", str(self.config_path),
+                "--stats", str(self.out / f"car_{car_id}.json")]
+
+    def note(self, what: str) -> None:
+        self.events.append((time.time(), what))
+        print(f"  t+{time.time() - self.t_go:5.1f}s: {what}", flush=True)
+
+
+def run(scenario: Scenario, out: Path, seed: int = 0, timeout_s: float | None = None,
+        natnet_version: str = "3.1", mocap_args: tuple[str, ...] = (), stop: threading.Event | None = None,
+        dashboard_port: int | None = None, wrap: Callable[[str, list[str]], list[str]] | None = None,
+        schedule: list[tuple[float, Callable[[RunContext], None]]] = (), infra_ip: str = "127.0.0.1") -> dict:
+    """Run the fleet to completion; returns the summary (also written to out/summary.json).
+
+    ``dashboard_port``: also start ``trustfg dashboard`` there (0: any free port).
+    ``wrap(name, argv)``: how to start each child (e.g. inside a network namespace).
+    ``schedule``: (seconds after the go, action) -- faults injected during the run."""
+    stop = stop or threading.Event()
+    out.mkdir(parents=True, exist_ok=True)
+    config_path = out / "fleet.toml"
+    config_path.write_text(dump_scenario(scenario))
+    timeout_s = timeout_s or scenario.sim.timeout_s + 15.0
+    processes = Processes(wrap)
+    observer_endpoint = f"tcp/{infra_ip}:{free_port()}"
+    pending = sorted(schedule, key=lambda item: item[0])
+    context = None
+    summary: dict = {}
+    t_go = None
+    crashed_early: list[str] = []
+    try:
+        mocap = processes.start("mocap-sim", ["mocap-sim", "--config", str(config_path), "--ground-truth",
+                                              str(out / "ground_truth.csv"), "--natnet-version", natnet_version,
+                                              "--command-log", str(out / "commands.csv"),
+                                              "--seed", str(seed), *mocap_args],
+                                out / "mocap_sim.log", stdout=subprocess.PIPE)
+        _wait_ready(mocap, stop)
+        if dashboard_port is not None:
+            port = dashboard_port or free_port()
+            processes.start("dashboard", ["dashboard", "--config", str(config_path), "--port", str(port),
+                                          "--listen", f"tcp/{infra_ip}:{free_port()}"], out / "dashboard.log")
+            print(f"dashboard: http://127.0.0.1:{port}/", flush=True)
+        for car in scenario.cars:
+            processes.start(f"car {car.id}", RunContext(scenario, out, processes, config_path, 0.0).car_args(car.id),
+                            out / f"car_{car.id}.log")
+        with FleetBus(scenario.bus, scenario.fleet, None, listen=(observer_endpoint,)) as bus:
+            recorder = Recorder(bus, out / "messages.jsonl")
+            try:
+                ids = [c.id for c in scenario.cars]
+                print(f"trustfg sim: {len(ids)} cars, waiting for them to come up ...", flush=True)
+                deadline = time.monotonic() + READY_TIMEOUT_S + 5 * len(ids)
+                while not stop.is_set() and not all(bus.alive.get(i) and i in recorder.status for i in ids):
+                    recorder.poll()
+                    if processes.crashed() or time.monotonic() > deadline:
+                        missing = [i for i in ids if not (bus.alive.get(i) and i in recorder.status)]
+                        raise RuntimeError(f"cars {missing} did not come up (crashed: {processes.crashed()})")
+                    time.sleep(0.05)
+                t_go = time.time() + START_LEAD_S
+                start = messages.StartMessage(1, time.time(), departures(scenario, seed, t_go))
+                bus.publish("start", messages.encode(start))
+                context = RunContext(scenario, out, processes, config_path, t_go, recorder)
+                print(f"trustfg sim: go (seed {seed}); recording to {out}", flush=True)
+                end = time.monotonic() + timeout_s
+                next_report = time.monotonic() + 5.0
+                while not stop.is_set() and time.monotonic() < end:
+                    recorder.poll()
+                    while pending and time.time() >= t_go + pending[0][0]:
+                        t_action, action = pending.pop(0)
+                        again = action(context)  # a number: not yet, ask again that much later
+                        if isinstance(again, (int, float)) and not isinstance(again, bool):
+                            pending.append((time.time() - t_go + float(again), action))
+                            pending.sort(key=lambda item: item[0])
+                    arrived = [i for i in ids if recorder.status.get(i) and recorder.status[i].at_goal]
+                    if len(arrived) == len(ids) and not pending:
+                        break
+                    if time.monotonic() > next_report:
+                        next_report += 5.0
+                        print(f"  t+{time.time() - t_go:5.1f}s: {len(arrived)}/{len(ids)} cars at their goals",
+                              flush=True)
+                    time.sleep(0.05)
+                crashed_early = processes.crashed()
+                recorder.poll()
+            finally:
+                processes.stop([name for name in processes.children if name.startswith("car")])
+                recorder.poll()
+                recorder.close()
+        processes.stop()
+        summary = summarise(scenario, out, recorder, t_go, crashed_early)
+    finally:
+        processes.stop()
+    if context is not None and context.events:
+        summary["events"] = [[round(t - context.t_go, 3), what] for t, what in context.events]
+    (out / "summary.json").write_text(json.dumps(summary, indent=1))
+    summary["recording"] = str(convert_run(out, scenario))
+    return summary
+
+
+def _wait_ready(process: subprocess.Popen, stop: threading.Event) -> None:
+    deadline = time.monotonic() + READY_TIMEOUT_S
+    while not stop.is_set() and time.monotonic() < deadline:
+        readable, _, _ = select.select([process.stdout], [], [], 0.2)
+        if readable:
+            line = process.stdout.readline()
+            if line.strip() == "READY":
+                return
+            if not line and process.poll() is not None:
+                raise RuntimeError(f"mocap-sim exited with {process.returncode} before it was ready")
+        elif process.poll() is not None:
+            raise RuntimeError(f"mocap-sim exited with {process.returncode} before it was ready")
+    raise RuntimeError("mocap-sim did not become ready")
+
+
+def read_ground_truth(path: Path, ids: list[int]) -> tuple[np.ndarray, np.ndarray]:
+    """(times (T,), states (T, n, 5)) from mocap-sim's CSV; rows of a time step together."""
+    rows = defaultdict(dict)
+    with open(path, newline="") as f:
+        for row in csv.DictReader(f):
+            rows[float(row["t"])][int(row["car_id"])] = [float(row[k]) for k in ("x", "y", "yaw", "v", "omega")]
+    times = sorted(t for t, cars in rows.items() if all(i in cars for i in ids))
+    states = np.array([[rows[t][i] for i in ids] for t in times])
+    return np.array(times), states
+
+
+def summarise(scenario: Scenario, out: Path, recorder: Recorder, t_go: float | None,
+              crashed: list[str]) -> dict:
+    ids = [c.id for c in scenario.cars]
+    times, states = read_ground_truth(out / "ground_truth.csv", ids)
+    radii = np.array([c.radius_m for c in scenario.cars])
+    positions = states[:, :, :2]
+    distance = metrics.min_distance_matrix(positions)
+    clearance = metrics.clearance_matrix(distance, radii)
+    goals = np.array([c.goal for c in scenario.cars])
+    reached_at = []
+    for i in range(len(ids)):
+        near = np.nonzero(np.linalg.norm(positions[:, i] - goals[i], axis=1) <= scenario.sim.goal_tolerance_m)[0]
+        reached_at.append(float(times[near[0]] - (t_go or times[0])) if len(near) else None)
+    depart = [0.0] * len(ids)
+    start = next((json.loads(line)["message"] for line in open(out / "messages.jsonl")
+                  if '"kind": "start"' in line and '"message"' in line), None)
+    if start and t_go is not None:
+        depart = [start["cars"][str(i)]["depart"] - t_go for i in ids]
+    rel_times = times - (t_go or times[0])
+    trust = [[1.0 if a == b else _trust(recorder, a, b) for b in ids] for a in ids]
+    stats = {i: _read_json(out / f"car_{i}.json") for i in ids}
+    replan = {str(i): _replan_stats(stats[i]) for i in ids}
+    reached = [r is not None for r in reached_at]
+    summary = {
+        "scenario": scenario.name,
+        "car_ids": ids,
+        "min_distance": _round(distance),
+        "min_clearance": _round(clearance),
+        "breaches": metrics.breaches(clearance, ids),
+        "obstacle_min_clearance": round(metrics.obstacle_min_clearance(positions, radii, build_sdf(scenario.world)), 4),
+        "reached_goal": reached,
+        "makespan_s": round(max(reached_at), 3) if all(reached) else None,
+        "inconsistency": round(metrics.inconsistency_index(rel_times, states, depart, reached_at), 4),
+        "trust": trust,
+        "replan_ms": replan,
+        "messages": dict(recorder.counts) | {"dropped_by_recorder": dict(recorder.inbox.dropped)},
+        "messages_per_car": {str(i): dict(recorder.per_sender.get(i, {})) for i in ids},
+        "control": {str(i): (stats[i] or {}).get("control") for i in ids},
+        "crashed": sorted(int(name.split()[1]) for name in crashed if name.startswith("car"))
+        + (["mocap-sim"] if "mocap-sim" in crashed else []),
+    }
+    liars = [c.id for c in scenario.cars if c.misinformation > 0]
+    if liars:
+        liar = ids.index(liars[0])
+        summary["liar_id"] = liars[0]
+        summary["honest_ids"] = [i for i in ids if i not in liars]
+        summary["liar_min_distance"] = [round(float(distance[k, liar]), 4) for k, i in enumerate(ids) if i not in liars]
+    return summary
+
+
+def _trust(recorder: Recorder, a: int, b: int) -> float | None:
+    report = recorder.trust.get(a)
+    if report is None or b not in report.peers:
+        return None
+    return round(report.peers[b].trust, 4)
+
+
+def _read_json(path: Path) -> dict | None:
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+
+
+def _replan_stats(stats: dict | None) -> dict | None:
+    if not stats or not stats.get("replan_ms"):
+        return None
+    values = np.array(stats["replan_ms"])
+    return {"count": len(values), "median": round(float(np.median(values)), 2),
+            "p95": round(float(np.percentile(values, 95)), 2), "max": round(float(values.max()), 2)}
+
+
+def _round(matrix: np.ndarray) -> list[list[float]]:
+    return [[round(float(x), 4) for x in row] for row in matrix]
+
+
+def print_summary(summary: dict) -> None:
+    ids = summary["car_ids"]
+    print(f"\n== trustfg sim: {summary['scenario']}, cars {ids}")
+    print(f"breaches (clearance < 0.1 m): {summary['breaches'] or 'none'}")
+    print(f"reached goal: {summary['reached_goal']}, makespan {summary['makespan_s']} s, "
+          f"obstacle clearance {summary['obstacle_min_clearance']} m")
+    print("min distance matrix (m):")
+    print(np.array2string(np.array(summary["min_distance"]), precision=2, suppress_small=True))
+    print("trust matrix (truster row, trustee column):")
+    for a, row in zip(ids, summary["trust"]):
+        print(f"  {a}: " + "  ".join("  -  " if v is None else f"{v:.2f}" for v in row))
+    print("replan ms (median / p95):  " + "  ".join(
+        f"{i}: {r['median']}/{r['p95']}" if r else f"{i}: -" for i, r in summary["replan_ms"].items()))
+    print("commands (Hz, jitter p99 ms): " + "  ".join(
+        f"{i}: {c['rate_hz']}/{c['jitter_ms_p99']}" if c else f"{i}: -" for i, c in summary["control"].items()))
+    print(f"messages: {summary['messages']}")
+    if "liar_id" in summary:
+        print(f"liar {summary['liar_id']}: min distance from honest cars {summary['liar_min_distance']}")
+    print(f"crashed: {summary['crashed'] or 'none'}")
+
+
+def _port_free(port: int) -> bool:
+    with socket.socket() as s:
+        try:
+            s.bind(("127.0.0.1", port))
+        except OSError:
+            return False
+    return True
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="trustfg sim", description=__doc__.split("\n")[0])
+    parser.add_argument("--scenario", type=Path, default=None,
+                        help="scenario TOML (default: intersection, or intersection-8 for more than 4 cars)")
+    parser.add_argument("--cars", type=int, default=None, help="use the first N cars of the scenario")
+    parser.add_argument("--liar", type=int, default=None, help="car id that publishes falsified plans")
+    parser.add_argument("--misinformation", type=float, default=0.4, help="the liar's fraction of false plans")
+    parser.add_argument("--out", type=Path, default=None, help="run folder (default runs/sim-<time>)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the departures and cruise speeds")
+    parser.add_argument("--timeout", type=float, default=None, help="seconds after the start (default: scenario's + 15)")
+    parser.add_argument("--natnet-version", choices=["3.0", "3.1", "4.0", "4.1"], default="3.1")
+    parser.add_argument("--no-dashboard", action="store_true", help="do not start the dashboard")
+    parser.add_argument("--dashboard-port", type=int, default=8765, help="dashboard port (0: any free one)")
+    parser.add_argument("--mocap", action="append", default=[], metavar="ARG",
+                        help="extra argument for mocap-sim, e.g. --mocap=--drop-rate=0.3 (repeatable)")
+    args = parser.parse_args(argv)
+    if args.cars is not None and args.cars < 1:
+        parser.error("--cars must be at least 1")
+    if not 0.0 <= args.misinformation <= 1.0:
+        parser.error("--misinformation must be within [0, 1]")
+    try:
+        scenario = load_scenario(args.scenario or default_scenario(args.cars))
+        fleet = loopback_fleet(scenario, args.cars, args.liar, args.misinformation)
+    except ConfigError as exc:
+        print(f"trustfg sim: {exc}", file=sys.stderr)
+        return 2
+    out = args.out or Path("runs") / time.strftime("sim-%Y%m%d-%H%M%S")
+    stop = stop_on_signals(threading.Event())
+    try:
+        port = None if args.no_dashboard else (args.dashboard_port if _port_free(args.dashboard_port) else 0)
+        summary = run(fleet, out, args.seed, args.timeout, args.natnet_version, tuple(args.mocap), stop, port)
+    except RuntimeError as exc:
+        print(f"trustfg sim: {exc} (logs in {out})", file=sys.stderr)
+        return 1
+    print_summary(summary)
+    print(f"\nwrote {out.resolve()} (replay: trustfg dashboard --replay {out}; report: trustfg report {out})")
+    if stop.is_set():
+        print("interrupted", file=sys.stderr)
+        return 130
+    ok = not summary["breaches"] and not summary["crashed"] and all(summary["reached_goal"])
+    return 0 if ok else 1
