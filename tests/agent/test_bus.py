@@ -1,0 +1,95 @@
+"""The fleet bus on real Zenoh sessions over loopback TCP, multicast scouting off."""
+
+import time
+
+import pytest
+
+from agent import messages
+from agent.bus import BusError, FleetBus, parse_key
+from agent.config import BusConfig
+from tests.conftest import free_tcp_port, wait_for
+
+FLEET = "t"
+
+
+def endpoint():
+    return f"tcp/127.0.0.1:{free_tcp_port()}"
+
+
+def pose(sender, seq):
+    return messages.encode(messages.PoseMessage(sender, seq, time.time(), 1.0, 2.0, 0.5, True))
+
+
+@pytest.mark.parametrize("key, parsed", [
+    ("trustfg/t/3/plan", (3, "plan")), ("trustfg/t/start", (0, "start")),
+    ("trustfg/t/0/plan", None), ("trustfg/t/256/plan", None), ("trustfg/t/03/plan", None),
+    ("trustfg/u/3/plan", None), ("trustfg/t/3/teleport", None), ("trustfg/t/3/plan/x", None),
+])
+def test_keys(key, parsed):
+    assert parse_key(FLEET, key) == parsed
+
+
+def test_messages_flow_between_two_cars_and_the_sender_comes_from_the_key():
+    a, b = endpoint(), endpoint()
+    with FleetBus(BusConfig(listen=(a,)), FLEET, 1) as one, \
+            FleetBus(BusConfig(listen=(b,), connect=(a,)), FLEET, 2) as two:
+        assert wait_for(lambda: one.alive.get(2) and two.alive.get(1))
+        got = []
+        assert wait_for(lambda: (one.publish("pose", pose(1, 1)), got.extend(two.drain()), got)[2], 5.0)
+        assert got[0].sender == 1 and got[0].kind == "pose"
+        assert messages.decode(got[0].payload).x == 1.0
+        assert not one.drain() or all(r.sender == 2 for r in one.drain())  # never our own
+
+
+def test_a_late_joiner_gets_the_latest_plan_at_once():
+    a = endpoint()
+    plan = messages.encode(messages.PlanMessage(1, 7, time.time(), __import__("agent.gp").gp.Plan(
+        0.0, 0.5, __import__("numpy").zeros((3, 2)), __import__("numpy").zeros((3, 2))), (1.0, 1.0)))
+    with FleetBus(BusConfig(listen=(a,)), FLEET, 1) as one:
+        one.publish("plan", b"old")
+        one.publish("plan", plan)
+        with FleetBus(BusConfig(listen=(endpoint(),), connect=(a,)), FLEET, 3) as late:
+            got = []
+            assert wait_for(lambda: (got.extend(late.drain()), any(r.kind == "plan" for r in got))[1], 5.0)
+            plans = [r for r in got if r.kind == "plan"]
+            assert plans[-1].payload == plan and all(r.payload != b"old" for r in plans)
+
+
+def test_liveliness_reports_a_departed_car():
+    a = endpoint()
+    with FleetBus(BusConfig(listen=(a,)), FLEET, None) as observer:
+        car = FleetBus(BusConfig(listen=(endpoint(),), connect=(a,)), FLEET, 5)
+        car.open()
+        assert wait_for(lambda: observer.alive.get(5) is True)
+        started = time.monotonic()
+        car.close()
+        assert time.monotonic() - started < 2.0
+        assert wait_for(lambda: observer.alive.get(5) is False)
+
+
+def test_the_queue_is_bounded_and_drops_are_counted():
+    a = endpoint()
+    with FleetBus(BusConfig(listen=(a,), queue_size=16), FLEET, None) as observer, \
+            FleetBus(BusConfig(listen=(endpoint(),), connect=(a,)), FLEET, 4) as car:
+        assert wait_for(lambda: observer.alive.get(4))
+        for seq in range(200):
+            car.publish("trust", pose(4, seq))
+        assert wait_for(lambda: observer.counters["received_trust"] >= 200, 5.0)
+        assert len(observer.drain()) == 16
+        assert observer.counters["dropped_queue_full"] == 200 - 16
+
+
+def test_an_observer_cannot_publish_car_messages_and_a_car_cannot_start():
+    with FleetBus(BusConfig(listen=(endpoint(),)), FLEET, None) as observer:
+        with pytest.raises(BusError):
+            observer.publish("plan", b"x")
+    with FleetBus(BusConfig(listen=(endpoint(),)), FLEET, 1) as car:
+        with pytest.raises(BusError):
+            car.publish("start", b"x")
+
+
+def test_bad_zenoh_settings_are_a_clear_error(tmp_path):
+    bad = tmp_path / "bad.json5"
+    bad.write_text("{ this is not json5 ")
+    with pytest.raises(BusError, match="bad Zenoh configuration"):
+        FleetBus(BusConfig(zenoh_config=str(bad)), FLEET, 1).open()

@@ -1,0 +1,89 @@
+import dataclasses
+
+import pytest
+
+from agent.config import ConfigError, PlannerConfig, load_scenario, scenario_from_dict, with_overrides
+from tests.conftest import SCENARIOS
+
+
+def minimal(**extra):
+    data = {"name": "t", "cars": [{"id": 1, "start": [0.0, 0.0], "goal": [1.0, 0.0]}]}
+    data.update(extra)
+    return data
+
+
+def test_shipped_scenarios_load():
+    for path in SCENARIOS.glob("*.toml"):
+        scenario = load_scenario(path)
+        assert scenario.cars, path
+        assert len({c.id for c in scenario.cars}) == len(scenario.cars)
+
+
+def test_paper_lab_coordinates(lab):
+    starts = [c.start for c in lab.cars]
+    goals = [c.goal for c in lab.cars]
+    assert starts == [(0.4, -2.15), (-0.4, 2.15), (-2.15, -0.4), (2.15, 0.4)]
+    assert goals == [(-2.15, 0.4), (2.15, -0.4), (0.4, 2.15), (-0.4, -2.15)]
+
+
+def test_defaults_fill_what_a_file_leaves_out():
+    scenario = scenario_from_dict(minimal())
+    assert scenario.planner == PlannerConfig()
+    assert scenario.cars[0].radius_m == 0.1
+
+
+@pytest.mark.parametrize("data, message", [
+    (minimal(planner={"support_states": "many"}), "planner.support_states: expected an integer"),
+    (minimal(planner={"suport_states": 21}), "planner.suport_states: unknown key"),
+    (minimal(planner={"qc": -1.0}), "planner.qc: must be > 0"),
+    (minimal(planner={"interpolation": "cubic"}), "planner.interpolation"),
+    (minimal(trust={"forgetting": 1.5}), "trust.forgetting"),
+    (minimal(world={"obstacles": [{"kind": "rect", "min": [1, 1], "max": [0, 0]}]}), "world.obstacles[0]"),
+    (minimal(world={"obstacles": [{"kind": "circle"}]}), "world.obstacles[0].kind"),
+    (minimal(world={"bounds_m": [0, 0, 1]}), "world.bounds_m: expected 4 values"),
+    (minimal(sim={"step_s": True}), "sim.step_s: expected a number"),
+    ({"name": "t", "cars": [{"id": 1, "start": [0, 0]}]}, "cars[0].goal: missing required key"),
+    ({"name": "t", "cars": [{"id": 0, "start": [0, 0], "goal": [1, 1]}]}, "cars[0].id"),
+    ({"name": "t", "cars": [{"id": 1, "start": [0, 0], "goal": [1, 1]},
+                            {"id": 1, "start": [0, 1], "goal": [1, 0]}]}, "car ids must be unique"),
+    ({"name": "t", "cars": []}, "cars: a scenario needs at least one car"),
+    ({"cars": [{"id": 1, "start": [0, 0], "goal": [1, 1]}]}, "name: missing required key"),
+    (minimal(cars=[{"id": 1, "start": [0, 0], "goal": [1, 1], "misinformation": 2.0}]), "misinformation"),
+])
+def test_bad_config_names_the_key(data, message):
+    with pytest.raises(ConfigError) as info:
+        scenario_from_dict(data)
+    assert message in str(info.value)
+
+
+def test_bad_file_errors(tmp_path):
+    missing = tmp_path / "nope.toml"
+    with pytest.raises(ConfigError, match="no such scenario file"):
+        load_scenario(missing)
+    broken = tmp_path / "broken.toml"
+    broken.write_text("name = \n")
+    with pytest.raises(ConfigError, match="not valid TOML"):
+        load_scenario(broken)
+    wrong = tmp_path / "wrong.toml"
+    wrong.write_text('name = "x"\n[[cars]]\nid = 1\nstart = [0, 0]\ngoal = [1, 1]\n[planner]\nqc = "big"\n')
+    with pytest.raises(ConfigError, match=r"wrong.toml: planner.qc: expected a number"):
+        load_scenario(wrong)
+
+
+def test_overrides_are_validated(intersection):
+    changed = with_overrides(intersection.planner, support_states=41)
+    assert changed.support_states == 41
+    with pytest.raises(ConfigError):
+        with_overrides(intersection.planner, support_states=1)
+
+
+def test_config_is_immutable(intersection):
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        intersection.planner.qc = 3.0  # type: ignore[misc]
+
+
+def test_dump_and_load_round_trip(tmp_path, lab):
+    from agent.config import dump_scenario
+    path = tmp_path / "again.toml"
+    path.write_text(dump_scenario(lab))
+    assert load_scenario(path) == lab

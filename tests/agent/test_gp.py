@@ -1,0 +1,82 @@
+import gtsam
+import numpy as np
+import pytest
+from gtsam.symbol_shorthand import V, X
+
+from agent.gp import Plan, interpolation_matrices, interpolation_weights
+
+
+def random_plan(rng, n=6, t0=1.0, dt=0.7):
+    return Plan(t0, dt, rng.normal(size=(n, 2)), rng.normal(size=(n, 2)))
+
+
+def test_lambda_psi_reproduce_the_endpoints():
+    lam, psi = interpolation_matrices(0.5, 0.0)
+    assert np.allclose(lam, np.eye(2)) and np.allclose(psi, 0)
+    lam, psi = interpolation_matrices(0.5, 0.5)
+    assert np.allclose(lam, 0) and np.allclose(psi, np.eye(2))
+
+
+def test_plan_interpolation_is_the_wnoa_posterior_mean():
+    rng = np.random.default_rng(0)
+    plan = random_plan(rng)
+    for tau in rng.uniform(0.0, plan.dt, 20):
+        lam, psi = interpolation_matrices(plan.dt, tau)
+        i = 2
+        x = lam @ np.stack([plan.positions[i], plan.velocities[i]]) + psi @ np.stack(
+            [plan.positions[i + 1], plan.velocities[i + 1]])
+        (p,), (v,) = plan.state_at(plan.t0 + (i * plan.dt) + tau)
+        assert np.allclose(x[0], p, atol=1e-12) and np.allclose(x[1], v, atol=1e-12)
+
+
+def test_interpolation_agrees_with_gtsam():
+    """Our Lambda/Psi against GTSAM's own WNOA interpolator (updateInterpValuesPoint2)."""
+    rng = np.random.default_rng(3)
+    dt, qc = 0.4, np.array([0.7, 0.7])
+    values = gtsam.Values()
+    graph = gtsam.NonlinearFactorGraph()
+    estimated = {gtsam.StateData(X(0), V(0), 0.0), gtsam.StateData(X(2), V(2), dt)}
+    p0, v0, p2, v2 = rng.normal(size=(4, 2))
+    for key, value in ((X(0), p0), (V(0), v0), (X(2), p2), (V(2), v2)):
+        values.insert(key, value)
+    graph.add(gtsam.WnoaMotionFactorPoint2(*sorted(estimated, key=lambda s: s.time), qc))
+    tau = 0.13
+    interp = {gtsam.StateData(X(1), V(1), tau)}
+    result = gtsam.updateInterpValuesPoint2(graph, values, estimated, interp, qc)
+    plan = Plan(0.0, dt, np.stack([p0, p2]), np.stack([v0, v2]))
+    (p,), (v,) = plan.state_at(tau)
+    assert np.allclose(result.atPoint2(X(1)), p, atol=1e-9)
+    assert np.allclose(result.atPoint2(V(1)), v, atol=1e-9)  # stored as a fixed-size Vector2
+
+
+def test_weights_match_matrices():
+    w = interpolation_weights(0.5, np.array([0.0, 0.25, 0.6]))
+    lam, psi = interpolation_matrices(0.5, 0.125)
+    assert np.allclose(w[1, :, :2], lam) and np.allclose(w[1, :, 2:], psi)
+
+
+def test_acceleration_is_the_derivative_of_velocity():
+    rng = np.random.default_rng(1)
+    plan = random_plan(rng)
+    for t in rng.uniform(plan.t0 + 0.01, plan.t_end - 0.01, 20):
+        h = 1e-6
+        numeric = (plan.state_at(t + h)[1] - plan.state_at(t - h)[1]) / (2 * h)
+        assert np.allclose(plan.acceleration_at(t), numeric, atol=1e-5)
+
+
+def test_plan_rests_outside_its_span():
+    rng = np.random.default_rng(2)
+    plan = random_plan(rng)
+    (p,), (v,) = plan.state_at(plan.t_end + 5.0)
+    assert np.allclose(p, plan.positions[-1]) and np.allclose(v, 0.0)
+    (p,), _ = plan.state_at(plan.t0 - 5.0)
+    assert np.allclose(p, plan.positions[0])
+
+
+@pytest.mark.parametrize("t0, dt, n", [(0.3, 0.1, 30), (2.0, 0.9, 5)])
+def test_resampling_preserves_the_trajectory(t0, dt, n):
+    rng = np.random.default_rng(4)
+    plan = random_plan(rng, n=8, t0=0.0, dt=0.5)
+    again = plan.resampled(t0, dt, n)
+    inside = again.times()[again.times() <= plan.t_end]
+    assert np.allclose(again.position_at(inside), plan.position_at(inside))

@@ -1,0 +1,145 @@
+import math
+
+import msgpack
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from agent import messages
+from agent.gp import Plan
+from agent.messages import (Inbox, MessageError, PeerTrust, PlanMessage, PoseMessage, StatusMessage,
+                            TrustReport, decode, encode)
+
+
+def plan_message(sender=2, seq=1, n=21):
+    rng = np.random.default_rng(seq)
+    plan = Plan(10.0, 0.5, rng.normal(size=(n, 2)), rng.normal(size=(n, 2)))
+    return PlanMessage(sender, seq, 10.01, plan, (0.4, 2.15))
+
+
+def samples():
+    return [
+        plan_message(),
+        TrustReport(3, 7, 12.5, {1: PeerTrust((1.0, 2.0, 3.0), (0.0, 0.5, 9.0), (0.9, 0.8, 0.3), 0.3, 0.9),
+                                 4: PeerTrust((5.0,) * 3, (0.0,) * 3, (0.97,) * 3, 0.97, 0.45)}),
+        PoseMessage(4, 99, 13.0, 0.4, -2.15, 1.5708, True),
+        StatusMessage(1, 3, 14.0, "driving", 4.2, 5, False, {"plans_rejected": 2, "replans": 40}),
+    ]
+
+
+@pytest.mark.parametrize("message", samples(), ids=lambda m: m.kind)
+def test_round_trip(message):
+    again = decode(encode(message))
+    assert type(again) is type(message)
+    assert (again.sender, again.seq, again.stamp) == (message.sender, message.seq, message.stamp)
+    if isinstance(message, PlanMessage):
+        assert np.array_equal(again.plan.positions, message.plan.positions)
+        assert np.array_equal(again.plan.velocities, message.plan.velocities)
+        assert (again.plan.t0, again.plan.dt, again.goal) == (message.plan.t0, message.plan.dt, message.goal)
+    else:
+        assert again == message
+
+
+def test_golden_bytes_of_a_pose():
+    """The wire format is a contract with other implementations: pin one encoding."""
+    payload = encode(PoseMessage(4, 99, 13.0, 0.5, -2.0, 1.5, True))
+    assert payload.hex() == (
+        "89a17601a16ba4706f7365a2696404a373657163a174cb402a000000000000a178cb3fe0000000000000"
+        "a179cbc000000000000000a3796177cb3ff8000000000000a576616c6964c3")
+
+
+def mutate(message: dict, **changes) -> bytes:
+    body = msgpack.unpackb(encode(message), strict_map_key=False)
+    for key, value in changes.items():
+        if value is ...:
+            body.pop(key)
+        else:
+            body[key] = value
+    return msgpack.packb(body)
+
+
+@pytest.mark.parametrize("changes, reason", [
+    (dict(v=2), "schema version"),
+    (dict(k="teleport"), "unknown message kind"),
+    (dict(id=0), "id"),
+    (dict(id=True), "id"),
+    (dict(seq=-1), "seq"),
+    (dict(t=float("nan")), "not finite"),
+    (dict(dt=0.0), "dt"),
+    (dict(pos=[0.0] * 41), "2N floats"),
+    (dict(pos=[0.0] * 2), "pos"),
+    (dict(pos=[0.0] * 40 + [float("inf"), 0.0]), "not finite"),
+    (dict(pos="abc"), "expected an array"),
+    (dict(goal=[1.0]), "goal"),
+    (dict(extra=1), "unexpected field"),
+    (dict(vel=...), "missing field"),
+])
+def test_invalid_plans_are_refused_with_a_reason(changes, reason):
+    with pytest.raises(MessageError, match=reason):
+        decode(mutate(plan_message(), **changes))
+
+
+def test_oversized_and_non_msgpack_payloads():
+    with pytest.raises(MessageError, match="exceeds"):
+        decode(b"\x00" * (messages.MAX_MESSAGE_BYTES + 1))
+    with pytest.raises(MessageError, match="not msgpack"):
+        decode(b"\xc1")
+    with pytest.raises(MessageError, match="expected a map"):
+        decode(msgpack.packb([1, 2, 3]))
+    with pytest.raises(MessageError):
+        decode("text")  # type: ignore[arg-type]
+
+
+@settings(max_examples=1500, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.binary(max_size=2048))
+def test_random_bytes_only_ever_raise_message_error(data):
+    try:
+        decode(data)
+    except MessageError:
+        pass
+
+
+@settings(max_examples=1500, deadline=None)
+@given(st.sampled_from([encode(m) for m in samples()]), st.data())
+def test_mutated_messages_only_ever_raise_message_error(payload, data):
+    raw = bytearray(payload)
+    for _ in range(data.draw(st.integers(1, 6))):
+        action = data.draw(st.sampled_from(["flip", "cut", "insert"]))
+        if action == "flip" and raw:
+            i = data.draw(st.integers(0, len(raw) - 1))
+            raw[i] ^= data.draw(st.integers(1, 255))
+        elif action == "cut" and raw:
+            raw = raw[: data.draw(st.integers(0, len(raw) - 1))]
+        else:
+            i = data.draw(st.integers(0, len(raw)))
+            raw[i:i] = data.draw(st.binary(min_size=1, max_size=8))
+    try:
+        message = decode(bytes(raw))
+    except MessageError:
+        return
+    # Whatever decodes is fully valid: finite numbers, sane ids.
+    assert 1 <= message.sender <= 255 and math.isfinite(message.stamp)
+
+
+def test_inbox_drops_spoofed_replayed_and_out_of_order():
+    inbox = Inbox()
+    first, second = encode(plan_message(seq=5)), encode(plan_message(seq=6))
+    assert inbox.accept(first, key_sender=2) is not None
+    assert inbox.accept(first, key_sender=2) is None  # replay
+    assert inbox.accept(second, key_sender=2) is not None
+    assert inbox.accept(encode(plan_message(seq=4)), key_sender=2) is None  # out of order
+    assert inbox.accept(encode(plan_message(sender=3, seq=1)), key_sender=2) is None  # spoofed
+    assert inbox.accept(b"garbage", key_sender=2) is None
+    assert inbox.dropped == {"replayed": 1, "out_of_order": 1, "spoofed_sender": 1, "invalid": 1}
+    assert inbox.accepted["plan"] == 2
+
+
+def test_inbox_accepts_a_restarted_sender():
+    inbox = Inbox(restart_after_s=2.0)
+    late = plan_message(seq=500)
+    assert inbox.accept(encode(late)) is not None
+    restarted = PlanMessage(2, 1, late.stamp + 5.0, late.plan, late.goal)
+    assert inbox.accept(encode(restarted)) is not None
+    # ... but an old message with a small sequence number is still a replay.
+    assert inbox.accept(encode(PlanMessage(2, 0, late.stamp - 1.0, late.plan, late.goal))) is None

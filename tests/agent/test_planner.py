@@ -1,0 +1,112 @@
+import dataclasses
+
+import numpy as np
+import pytest
+
+from agent.config import PlannerConfig
+from agent.gp import Plan
+from agent.planner import PeerConstraint, PlanningError, PlanRequest, plan_trajectory
+
+LANES = [((0.4, -2.15), (0.4, 2.15)), ((-2.15, -0.4), (2.15, -0.4)), ((-0.4, 2.15), (-0.4, -2.15)),
+         ((2.15, 0.4), (-2.15, 0.4))]
+
+
+def request(start, goal, t_arrive=12.0, **kw):
+    return PlanRequest(t_now=0.0, position=np.array(start), velocity=np.zeros(2), goal=np.array(goal),
+                       t_arrive=t_arrive, lane=(start,), **kw)
+
+
+def min_sdf(plan, sdf):
+    times = np.linspace(plan.t0, plan.t_end, 800)
+    return float(sdf.distance(plan.position_at(times)).min())
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_plans_reach_the_goal_clear_of_obstacles(intersection_sdf, seed):
+    """Random start and goal in the arms of the intersection, random lanes through it."""
+    rng = np.random.default_rng(seed)
+    config = PlannerConfig()
+    arms = [np.array([0.0, -2.0]), np.array([-2.0, 0.0]), np.array([0.0, 2.0]), np.array([2.0, 0.0])]
+    a, b = rng.choice(4, 2, replace=False)
+    start = arms[a] + rng.uniform(-0.5, 0.5, 2) * (arms[a] == 0)
+    goal = arms[b] + rng.uniform(-0.5, 0.5, 2) * (arms[b] == 0)
+    result = plan_trajectory(PlanRequest(0.0, start, np.zeros(2), goal, 12.0, route=((0.0, 0.0),),
+                                         lane=(tuple(start), (0.0, 0.0))), config, intersection_sdf)
+    plan = result.plan
+    assert np.linalg.norm(plan.positions[-1] - goal) < 0.03
+    assert np.linalg.norm(plan.velocities[-1]) < 0.05
+    # The hinge is soft: a few millimetres inside epsilon, never near the wall.
+    assert min_sdf(plan, intersection_sdf) > config.epsilon_obstacle_m - 0.02
+
+
+def crossing_peer(t_cross=6.0):
+    """A peer going west -> east on y = -0.4, at x = 0.4 at t_cross."""
+    n = 25
+    times = np.linspace(0.0, 12.0, n)
+    speed = 4.3 / 12.0
+    x = 0.4 + speed * (times - t_cross)
+    positions = np.stack([x, np.full(n, -0.4)], axis=1)
+    velocities = np.tile([speed, 0.0], (n, 1))
+    return Plan(0.0, times[1] - times[0], positions, velocities)
+
+
+@pytest.mark.parametrize("t_cross", [5.0, 5.6, 6.0, 6.4, 7.0])
+@pytest.mark.parametrize("epsilon", [0.45, 0.9])
+def test_plan_keeps_epsilon_from_a_crossing_peer(intersection_sdf, t_cross, epsilon):
+    peer = crossing_peer(t_cross)
+    start, goal = LANES[0]
+    result = plan_trajectory(request(start, goal, peers=(PeerConstraint(peer, epsilon),)),
+                             PlannerConfig(), intersection_sdf)
+    times = np.linspace(0, 14, 1400)
+    gap = np.linalg.norm(result.plan.position_at(times) - peer.position_at(times), axis=1).min()
+    assert gap > epsilon - 0.03
+
+
+def test_without_proximity_the_plan_ignores_peers(intersection_sdf):
+    peer = crossing_peer(6.0)
+    start, goal = LANES[0]
+    config = PlannerConfig(proximity=False, consistency=False)
+    result = plan_trajectory(request(start, goal, peers=(PeerConstraint(peer, 0.45),)), config, intersection_sdf)
+    times = np.linspace(0, 14, 1400)
+    gap = np.linalg.norm(result.plan.position_at(times) - peer.position_at(times), axis=1).min()
+    assert gap < 0.45 - 0.1  # nowhere near the epsilon it would keep with the factor
+
+
+def test_warm_start_replans_in_few_iterations(intersection_sdf):
+    peer = crossing_peer(6.0)
+    start, goal = LANES[0]
+    config = PlannerConfig()
+    cold = plan_trajectory(request(start, goal, peers=(PeerConstraint(peer, 0.45),)), config, intersection_sdf)
+    (p,), (v,) = cold.plan.state_at(0.2)
+    warm_request = dataclasses.replace(request(start, goal, peers=(PeerConstraint(peer, 0.45),)),
+                                       t_now=0.2, position=p, velocity=v, warm_start=cold.plan)
+    warm = plan_trajectory(warm_request, config, intersection_sdf)
+    assert warm.warm and warm.iterations <= max(3, cold.iterations // 2)
+    # The near future, which the car is tracking, stays put (later parts may still improve).
+    near = np.linspace(0.2, 1.0, 9)
+    assert np.allclose(warm.plan.position_at(near), cold.plan.position_at(near), atol=0.02)
+
+
+def test_batched_and_gtsam_interpolation_agree(intersection_sdf):
+    peer = crossing_peer(6.0)
+    start, goal = LANES[0]
+    req = request(start, goal, peers=(PeerConstraint(peer, 0.45),))
+    batched = plan_trajectory(req, PlannerConfig(support_states=11), intersection_sdf)
+    native = plan_trajectory(req, PlannerConfig(support_states=11, interpolation="gtsam"), intersection_sdf)
+    assert batched.initial_error == pytest.approx(native.initial_error, rel=1e-9)
+    assert np.allclose(batched.plan.positions, native.plan.positions, atol=1e-6)
+
+
+@pytest.mark.parametrize("field, value", [("position", np.array([np.nan, 0.0])),
+                                          ("goal", np.array([1.0, 2.0, 3.0])),
+                                          ("t_arrive", float("inf"))])
+def test_bad_requests_are_refused(intersection_sdf, field, value):
+    req = dataclasses.replace(request(*LANES[0]), **{field: value})
+    with pytest.raises(PlanningError):
+        plan_trajectory(req, PlannerConfig(), intersection_sdf)
+
+
+def test_bad_peer_epsilon_is_refused(intersection_sdf):
+    req = request(*LANES[0], peers=(PeerConstraint(crossing_peer(), -1.0),))
+    with pytest.raises(PlanningError):
+        plan_trajectory(req, PlannerConfig(), intersection_sdf)

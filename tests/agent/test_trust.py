@@ -1,0 +1,122 @@
+import numpy as np
+import pytest
+
+from agent.config import TrustConfig
+from agent.messages import PeerTrust, TrustReport
+from agent.misbehaviour import falsify_testimony
+from agent.trust import TRANSPARENCY, TrustBook, epsilon_gain, expected, graded
+
+
+def test_expected_value_of_beta():
+    assert expected(np.array(0.0), np.array(0.0)) == 0.5
+    assert expected(np.array(8.0), np.array(0.0)) == pytest.approx(0.9)
+
+
+def test_graded_evidence():
+    assert graded(0.0, 0.1) == (1.0, 0.0)
+    assert graded(0.1, 0.1) == (1.0, 0.0)
+    assert graded(0.15, 0.1) == pytest.approx((0.5, 0.5))
+    assert graded(0.3, 0.1) == (0.0, 1.0)
+
+
+def test_epsilon_gain_is_bounded_and_decreasing():
+    config = TrustConfig()
+    taus = np.linspace(0, 1, 101)
+    gains = np.array([epsilon_gain(t, config) for t in taus])
+    assert gains[-1] == 1.0
+    assert np.all(np.diff(gains) <= 1e-12)
+    assert gains.max() <= config.epsilon_gain_max
+    assert epsilon_gain(0.45, config) == pytest.approx(config.epsilon_gain_max)
+
+
+def test_forgetting_decays_towards_the_prior():
+    config = TrustConfig()
+    book = TrustBook(owner=1, config=config)
+    for k in range(50):
+        book.record(2, TRANSPARENCY, 0.0, 1.0, now=0.1 * k)
+    low = book.tau(2, 5.0)[TRANSPARENCY]
+    later = book.tau(2, 60.0)[TRANSPARENCY]
+    prior = expected(np.array(config.prior_alpha), np.array(config.prior_beta))
+    assert low < 0.1
+    assert later == pytest.approx(prior, abs=0.02)
+
+
+def simulate_evidence(p_lie, seconds, rng, rate_hz=5.0, config=None):
+    """Transparency evidence as a receiver sees it: one check per plan message."""
+    book = TrustBook(owner=2, config=config or TrustConfig())
+    taus = []
+    for k in range(int(seconds * rate_hz)):
+        t = k / rate_hz
+        lie = rng.random() < p_lie
+        miss = rng.uniform(0.4, 0.8) if lie else abs(rng.normal(0, 0.02))
+        s, f = graded(miss, book.config.transparency_tolerance_m)
+        book.record(1, TRANSPARENCY, s, f, t)
+        taus.append((t, book.tau(1, t)[TRANSPARENCY]))
+    return np.array(taus)
+
+
+def test_a_forty_percent_liar_is_separated_from_honest_peers_within_three_seconds():
+    """Many seeds: trust in a 40 % liar ends up and stays 0.2 below an honest peer's."""
+    failures = 0
+    for seed in range(200):
+        rng = np.random.default_rng(seed)
+        liar = simulate_evidence(0.4, 20.0, rng)
+        honest = simulate_evidence(0.0, 20.0, rng)
+        after = liar[:, 0] >= 3.0
+        failures += not np.all(liar[after, 1] <= honest[after, 1] - 0.2)
+        assert np.all(honest[after, 1] > 0.8)
+    assert failures <= 4  # <= 2 % of seeds, from binomial tails in the first seconds
+
+
+def report(sender, peer, alpha, beta):
+    return TrustReport(sender, 1, 0.0, {peer: PeerTrust((alpha,) * 3, (beta,) * 3, (0.5,) * 3, 0.5, 0.45)})
+
+
+def trusted_book(owner=1, peers=(2, 3, 4), n=40):
+    book = TrustBook(owner=owner, config=TrustConfig())
+    for k in range(n):
+        for peer in peers:
+            for d in range(3):
+                book.record(peer, d, 1.0, 0.0, 0.1 * k)
+    return book
+
+
+def test_testimony_is_discounted_by_trust_in_the_reporter():
+    book = TrustBook(owner=1, config=TrustConfig())
+    # We know nothing of 4 yet; 2 is trusted, 3 is not.
+    for k in range(40):
+        for d in range(3):
+            book.record(2, d, 1.0, 0.0, 0.1 * k)
+            book.record(3, d, 0.0, 1.0, 0.1 * k)
+    now = 4.0
+    book.receive(report(2, 4, 0.0, 20.0))
+    from_trusted = book.tau(4, now)[0]
+    book.receive(report(2, 4, 0.0, 0.0))
+    book.receive(report(3, 4, 0.0, 20.0))
+    from_distrusted = book.tau(4, now)[0]
+    assert from_trusted < 0.3
+    assert from_distrusted > from_trusted + 0.3
+
+
+def test_lying_testimonies_do_not_sink_an_honest_peer():
+    """A liar that slanders honest cars: deviation test + discounting keep them trusted."""
+    book = trusted_book()
+    # Make 3 the liar in our own eyes (transparency failures).
+    for k in range(40):
+        book.record(3, TRANSPARENCY, 0.0, 1.0, 4.0 + 0.1 * k)
+    now = 8.0
+    honest = TrustReport(2, 1, now, {4: PeerTrust((30.0,) * 3, (0.0,) * 3, (0.97,) * 3, 0.97, 0.45)})
+    slander = falsify_testimony(honest)
+    slander = TrustReport(3, 1, now, slander.peers)
+    book.receive(slander)
+    assert book.trust(4, now) > 0.8
+    assert book.counters["testimonies_rejected"] > 0
+
+
+def test_self_testimony_and_testimony_about_the_receiver_are_ignored():
+    book = trusted_book()
+    before = book.tau(2, 4.0).copy()
+    book.receive(report(2, 2, 100.0, 0.0))  # 2 praising itself
+    book.receive(report(3, 1, 0.0, 100.0))  # 3 about us
+    assert np.allclose(book.tau(2, 4.0), before)
+    assert 1 not in book.direct

@@ -1,0 +1,135 @@
+"""Shared test helpers: scenarios and their distance fields, free ports, multicast groups,
+waiting on conditions, and the leftover checks (processes, ports) the last test runs."""
+
+from __future__ import annotations
+
+import itertools
+import os
+import socket
+import time
+from pathlib import Path
+
+import pytest
+
+from agent.config import load_scenario
+from agent.world import build_sdf
+
+ROOT = Path(__file__).resolve().parent.parent
+SCENARIOS = ROOT / "deploy" / "scenarios"
+
+
+@pytest.fixture(scope="session")
+def intersection():
+    return load_scenario(SCENARIOS / "intersection.toml")
+
+
+@pytest.fixture(scope="session")
+def lab():
+    return load_scenario(SCENARIOS / "lab.toml")
+
+
+@pytest.fixture(scope="session")
+def intersection_sdf(intersection):
+    return build_sdf(intersection.world)
+
+
+def free_tcp_port() -> int:
+    """A TCP port nobody listens on right now (bind to 0, read it, release it)."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def wait_for(predicate, timeout: float = 5.0, interval: float = 0.01) -> bool:
+    """Poll a condition until it holds or the deadline passes (no fixed sleeps)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(interval)
+    return predicate()
+
+
+def pytest_collection_modifyitems(config, items):
+    """The leftover check runs last, after every other test has cleaned up."""
+    last = [item for item in items if item.nodeid.endswith("test_nothing_is_left_behind")]
+    items[:] = [item for item in items if item not in last] + last
+
+
+def trustfg_processes() -> list[str]:
+    """Command lines of running trustfg processes (car, mocap-sim, sim, dashboard)."""
+    found = []
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit() or int(entry.name) == os.getpid():
+            continue
+        try:
+            argv = (entry / "cmdline").read_bytes().split(b"\0")
+        except OSError:
+            continue
+        text = " ".join(a.decode(errors="replace") for a in argv if a)
+        if "agent.cli" in text or "/trustfg " in text + " ":
+            found.append(f"{entry.name}: {text}")
+    return found
+
+
+def bound_ports() -> set[tuple[str, int]]:
+    """(protocol, port) of every listening TCP and bound UDP socket on this machine."""
+    ports = set()
+    for proto in ("tcp", "tcp6", "udp", "udp6"):
+        path = Path("/proc/net") / proto
+        if not path.exists():
+            continue
+        for line in path.read_text().splitlines()[1:]:
+            fields = line.split()
+            local, state = fields[1], fields[3]
+            if proto.startswith("tcp") and state != "0A":  # LISTEN only
+                continue
+            ports.add((proto, int(local.rsplit(":", 1)[1], 16)))
+    return ports
+
+
+BOUND_AT_START = bound_ports()
+
+
+# --- UDP ports and multicast groups of their own, for NatNet tests -------------------------
+
+_groups = itertools.count(1)
+
+
+def free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def next_multicast_group() -> str:
+    """A group of its own per test and per process, so parallel runs do not cross-talk."""
+    return f"239.253.{1 + os.getpid() % 250}.{1 + next(_groups) % 250}"
+
+
+@pytest.fixture(scope="session")
+def multicast_loopback() -> None:
+    """Skip (naming the OS error) unless multicast on the loopback interface works here."""
+    group, port = next_multicast_group(), free_udp_port()
+    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        rx.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        rx.bind((group, port))
+        rx.setsockopt(socket.IPPROTO_IP, socket.IP_ADD_MEMBERSHIP,
+                      socket.inet_aton(group) + socket.inet_aton("127.0.0.1"))
+        rx.settimeout(2.0)
+        tx.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, socket.inet_aton("127.0.0.1"))
+        tx.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_LOOP, 1)
+        tx.sendto(b"probe", (group, port))
+        rx.recvfrom(16)
+    except OSError as exc:
+        pytest.skip(f"multicast on loopback is not available here: {exc!r}")
+    finally:
+        rx.close()
+        tx.close()
+
+
+@pytest.fixture
+def multicast_group(multicast_loopback) -> tuple[str, int]:
+    return next_multicast_group(), free_udp_port()

@@ -1,0 +1,79 @@
+"""One car process against a NatNet server and a car link played by the test."""
+
+import dataclasses
+import json
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from agent import messages
+from agent.bus import FleetBus
+from agent.config import dump_scenario
+from agent.launch import free_port, loopback_fleet
+from bridge import natnet
+from bridge.carlink import CommandReceiver
+from mocap_sim.natnet_server import NatNetServer, NatNetServerOptions
+from tests.conftest import wait_for
+
+
+@pytest.fixture
+def one_car(intersection, tmp_path):
+    fleet = loopback_fleet(dataclasses.replace(intersection, cars=intersection.cars[:1]), None, None, 0.0)
+    path = tmp_path / "fleet.toml"
+    path.write_text(dump_scenario(fleet))
+    return fleet, path
+
+
+def served(car, tracked):
+    def bodies(t):
+        position, orientation = natnet.from_ground_plane(car.start[0], car.start[1], 1.5708, 0.05)
+        yield car.body_id, "car", position, orientation, tracked()
+    return bodies
+
+
+def test_car_process_stops_without_pose_drives_after_start_and_stops_on_sigterm(one_car, tmp_path):
+    fleet, path = one_car
+    car = fleet.cars[0]
+    tracked = {"on": True}
+    options = NatNetServerOptions(address="127.0.0.1", command_port=fleet.natnet.command_port, multicast=False,
+                                  data_port=0, natnet_version=natnet.V3_1)
+    host, port = car.link[len("udp://"):].rsplit(":", 1)
+    stats = tmp_path / "stats.json"
+    observer = f"tcp/127.0.0.1:{free_port()}"
+    with NatNetServer(options, served(car, lambda: tracked["on"])), \
+            CommandReceiver(car.id, (host, int(port))) as link, \
+            FleetBus(fleet.bus, fleet.fleet, None, listen=(observer,)) as bus:
+        process = subprocess.Popen([sys.executable, "-m", "agent.cli", "car", "--id", str(car.id), "--config",
+                                    str(path), "--stats", str(stats)], stderr=subprocess.PIPE, text=True)
+        try:
+            # Before the start: commands flow, and they are STOP.
+            assert link.wait_until(lambda c: c.accepted >= 20, 20.0), process.stderr
+            assert link.last_command.stop
+            assert wait_for(lambda: bus.alive.get(car.id), 10.0)
+            # After the start it drives: a non-zero speed command.
+            go = messages.StartMessage(1, time.time(), {car.id: (time.time() + 0.2, 0.4)})
+            bus.publish("start", messages.encode(go))
+            assert wait_for(lambda: link.last_command and link.last_command.v_mps > 0.05, 10.0)
+            # Its own pose lost (tracking invalid): it commands STOP within the pose timeout.
+            tracked["on"] = False
+            assert wait_for(lambda: link.last_command.stop, 1.0)
+            lost_at = time.monotonic()
+            assert wait_for(lambda: link.last_command.stop, 0.1)
+            tracked["on"] = True
+            assert wait_for(lambda: not link.last_command.stop, 2.0)
+            assert time.monotonic() - lost_at < 2.5
+            # SIGTERM: it stops the car and exits cleanly, quickly.
+            process.send_signal(signal.SIGTERM)
+            assert process.wait(timeout=5) == 0
+            assert link.last_command.stop
+        finally:
+            if process.poll() is None:
+                process.kill()
+                process.wait()
+            process.stderr.close()
+    summary = json.loads(stats.read_text())
+    assert summary["control"]["stale_pose_stops"] > 0
+    assert summary["control"]["sent"] > 50

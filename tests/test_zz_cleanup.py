@@ -1,0 +1,38 @@
+"""After the whole suite: no trustfg process and no port the tests opened is left."""
+
+from tests.conftest import BOUND_AT_START, bound_ports, trustfg_processes, wait_for
+
+
+def test_nothing_is_left_behind():
+    assert wait_for(lambda: not trustfg_processes(), 10.0), trustfg_processes()
+    assert wait_for(lambda: not (bound_ports() - BOUND_AT_START), 10.0), sorted(bound_ports() - BOUND_AT_START)
+    assert not fault_namespaces(), fault_namespaces()
+
+
+def fault_namespaces() -> list[str]:
+    """Network namespaces the fault suite made (they are named tfg...)."""
+    import shutil
+    import subprocess
+
+    if shutil.which("ip") is None:
+        return []
+    listing = subprocess.run(["ip", "netns", "list"], capture_output=True, text=True).stdout
+    return [line.split()[0] for line in listing.splitlines() if line.startswith("tfg")]
+
+
+def test_the_check_sees_a_leftover_process_and_port():
+    import socket
+    import subprocess
+    import sys
+
+    probe = subprocess.Popen([sys.executable, "-c", "import time, sys; time.sleep(60)", "agent.cli"])
+    sock = socket.socket()
+    sock.bind(("127.0.0.1", 0))
+    sock.listen()
+    try:
+        assert wait_for(lambda: any(line.startswith(f"{probe.pid}:") for line in trustfg_processes()), 5.0)
+        assert ("tcp", sock.getsockname()[1]) in bound_ports() - BOUND_AT_START
+    finally:
+        probe.kill()
+        probe.wait()
+        sock.close()
