@@ -16,10 +16,12 @@ How peers' plans are used (DESIGN.md, "Trust" and "Fleet bus"):
 * Safety and consistency evidence come every ``evidence_period_s`` from observations.
   Consistency compares accelerations averaged over CONSISTENCY_WINDOW_S: the change of
   the peer's observed velocity over the window against the change announced by the plan
-  it had shared when the window began -- "did it do what it said it would do?".
-  Differencing velocities over half a second is far less noisy than a second derivative
-  of noisy poses, and one plan for both ends keeps late or bunched messages from
-  looking like erratic driving.
+  it had made when the window began (by the plan's stamp) -- "did it do what it said it
+  would do?". Differencing velocities over half a second is far less noisy than a second
+  derivative of noisy poses, and one plan for both ends keeps late or bunched messages
+  from looking like erratic driving. Without a plan made within one replan period (plus
+  REPLAN_MARGIN_S) of the window's start -- lost or delayed messages -- there is no
+  consistency evidence.
 
 Decentralised consensus: every agent replans at a fixed rate against the latest accepted
 plans of its peers and publishes its own; the fleet iterates to agreement. Ties and
@@ -54,6 +56,10 @@ ARRIVAL_SLACK_S = 1.0
 STALE_PREDICTION_S = 1.0
 """A silent peer is predicted to keep its observed velocity this long, then to stop."""
 CONSISTENCY_WINDOW_S = 0.5
+REPLAN_MARGIN_S = 0.15
+"""Consistency is judged only against a plan stamped at most one replan period plus this
+before the window began. An older announcement has been superseded by plans we never
+received (loss, delay); holding a car to it would read silence as erratic driving."""
 START_FROM_PLAN_M = 0.05
 START_FROM_PLAN_MPS = 0.15
 """A replan starts from the previous plan while the car is this close to it."""
@@ -72,7 +78,7 @@ class PeerView:
     velocities: deque = field(default_factory=lambda: deque(maxlen=64))
     """(t, observed velocity) at evidence ticks."""
     history: deque = field(default_factory=lambda: deque(maxlen=32))
-    """(received at, plan) of the plans accepted lately."""
+    """(stamp, plan) of the plans accepted lately, in order of arrival."""
 
 
 @dataclass
@@ -140,7 +146,7 @@ class CarAgent:
         self.trust.record(message.sender, TRANSPARENCY, success, failure, now)
         if miss <= self.scenario.trust.plan_reject_m:
             view.accepted, view.accepted_received = message.plan, now
-            view.history.append((now, message.plan))
+            view.history.append((message.stamp, message.plan))
         else:
             self.counters["plans_rejected"] += 1
 
@@ -173,7 +179,7 @@ class CarAgent:
             view = self.peers.get(peer)
             if view is not None:
                 view.velocities.append((motion.stamp, motion.velocity))
-                mismatch = _acceleration_mismatch(view, config.stale_after_s)
+                mismatch = _acceleration_mismatch(view, self.scenario.control.replan_period_s + REPLAN_MARGIN_S)
                 if mismatch is not None:
                     s, f = graded(mismatch, config.consistency_tolerance_mps2)
                     self.trust.record(peer, CONSISTENCY, s, f, now)
@@ -298,18 +304,21 @@ class CarAgent:
         return self.trust.trust(peer, now)
 
 
-def _acceleration_mismatch(view: PeerView, stale_after_s: float) -> float | None:
+def _acceleration_mismatch(view: PeerView, fresh_s: float) -> float | None:
     """|mean observed - mean announced acceleration| over the last CONSISTENCY_WINDOW_S,
-    the announcement being the plan accepted last before the window began; None if there
-    is no such fresh plan or not enough observations yet."""
+    the announcement being the newest accepted plan the peer had made when the window
+    began (by its stamp: a plan that arrived late still tells what the peer meant then);
+    None if that plan is older than ``fresh_s`` then or there are not enough
+    observations yet."""
     t, observed = view.velocities[-1]
     start = next(((t_old, v_old) for t_old, v_old in reversed(view.velocities)
                   if t - t_old >= CONSISTENCY_WINDOW_S - 1e-6), None)
     if start is None:
         return None
     t_old, observed_old = start
-    announced = next(((r, p) for r, p in reversed(view.history) if r <= t_old), None)
-    if announced is None or t_old - announced[0] > stale_after_s:
+    announced = max(((stamp, p) for stamp, p in view.history if stamp <= t_old), key=lambda sp: sp[0],
+                    default=None)
+    if announced is None or t_old - announced[0] > fresh_s:
         return None
     plan = announced[1]
     (v_then,), (v_now,) = plan.state_at(t_old)[1], plan.state_at(t)[1]

@@ -1,0 +1,93 @@
+"""CarAgent's consistency evidence: a peer is held to what it announced, and lost or
+delayed plans never read as erratic driving."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from agent.car_agent import CarAgent
+from agent.gp import Plan
+from agent.messages import PlanMessage
+
+PEER = 2
+SEEDS = range(8)
+FRAME_S = 0.05  # observation period (NatNet is faster; the evidence tick is 0.1 s)
+END_S = 7.0
+
+
+def braking_at(t_brake: float, v0: float = 0.5, decel: float = 1.0):
+    """x(t), v(t) of a car cruising along +x that brakes to a stop from t_brake."""
+    def state(t: float) -> tuple[float, float]:
+        if t <= t_brake:
+            return v0 * t, v0
+        tau = min(t - t_brake, v0 / decel)
+        return v0 * t_brake + v0 * tau - 0.5 * decel * tau**2, v0 - decel * tau
+    return state
+
+
+def cruising(t: float) -> tuple[float, float]:
+    return 0.5 * t, 0.5
+
+
+def weaving(t: float) -> tuple[float, float]:
+    """A car that surges and brakes every two seconds around 0.5 m/s."""
+    w = 2 * np.pi / 2.0
+    return 0.5 * t - 0.3 / w * np.cos(w * t) + 0.3 / w, 0.5 + 0.3 * np.sin(w * t)
+
+
+def plan_of(state, s: float) -> Plan:
+    """The plan a car that will move as ``state`` from time s announces at s."""
+    times = s + 0.25 * np.arange(13)
+    xs, vs = zip(*(state(t) for t in times))
+    return Plan(t0=s, dt=0.25, positions=np.c_[xs, np.full(13, 0.5)],
+                velocities=np.c_[vs, np.zeros(13)])
+
+
+def consistency_failures(intersection, intersection_sdf, seed, moves, intends, delivery) -> float:
+    """Drive the peer as ``moves``; every 0.2 s it announces ``intends(s)``; ``delivery(s)``
+    says when that plan arrives (None: lost). Returns the consistency failure mass."""
+    no_forgetting = replace(intersection, trust=replace(intersection.trust, forgetting=1.0))
+    agent = CarAgent(intersection.cars[0], no_forgetting, intersection_sdf)
+    rng = np.random.default_rng(seed)
+    replans = np.arange(0.0, END_S, intersection.control.replan_period_s)
+    inbox = sorted((delivery(s), s) for s in replans if delivery(s) is not None)
+    for t in np.arange(0.0, END_S, FRAME_S):
+        while inbox and inbox[0][0] <= t + 1e-9:
+            _, s = inbox.pop(0)
+            agent.receive(PlanMessage(PEER, int(s * 5), s, intends(s), (5.0, 0.5)), t)
+        x, _ = moves(t)
+        agent.observe(t, PEER, x + rng.normal(0, 0.003), 0.5 + rng.normal(0, 0.003), 0.0)
+        agent.gather_evidence(t)
+    return float(agent.trust.direct[PEER].beta[1] - intersection.trust.prior_beta)
+
+
+def on_time(s: float) -> float:
+    return s + 0.005
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_a_car_that_does_not_do_what_it_announced_is_inconsistent(intersection, intersection_sdf, seed):
+    announced_cruise = lambda s: plan_of(cruising, s)  # noqa: E731
+    honest = consistency_failures(intersection, intersection_sdf, seed, weaving,
+                                  lambda s: plan_of(weaving, s), on_time)
+    liar = consistency_failures(intersection, intersection_sdf, seed, weaving, announced_cruise, on_time)
+    assert honest < 2.0  # tracking noise over 7 s, forgetting off
+    assert liar > 5 * max(honest, 1.0)
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_lost_and_delayed_plans_add_no_inconsistency(intersection, intersection_sdf, seed):
+    """The peer cruises, changes its mind at t = 3 s and brakes, which it announces at once
+    (and not before). With every plan on
+    time, only the windows straddling the change count against it; when the plans of
+    2.8..4.0 s are held up and arrive in one burst at 4.0 s (TCP under heavy loss), the
+    windows we could not judge must add nothing."""
+    state = braking_at(3.0)
+    intends = lambda s: plan_of(cruising if s < 3.0 else state, s)  # noqa: E731
+    delayed = lambda s: 4.0 if 2.8 <= s < 4.0 else on_time(s)  # noqa: E731
+    lost = lambda s: None if 2.8 <= s < 4.0 else on_time(s)  # noqa: E731
+    baseline = consistency_failures(intersection, intersection_sdf, seed, state, intends, on_time)
+    for delivery in (delayed, lost):
+        assert consistency_failures(intersection, intersection_sdf, seed, state, intends, delivery) \
+            <= baseline + 0.25
