@@ -8,7 +8,9 @@ Threads, each owning what it touches:
 * the control thread, at ``control.command_rate_hz`` on absolute deadlines, reads the
   car's own latest pose and the current plan and sends one command datagram: the
   tracking command, or STOP when there is no fresh pose (older than
-  ``control.pose_timeout_s``), no plan, no start yet, or the car has arrived;
+  ``control.pose_timeout_s``), no plan, no start yet, or the car has arrived; the
+  tracking speed is capped by the proximity guard (bridge.guard) against the other cars
+  it sees;
 * the main thread runs the agent: it drains frames and messages, gathers evidence,
   replans every ``control.replan_period_s`` and publishes plan, trust, pose and status.
 
@@ -52,6 +54,7 @@ from agent.ticker import ticks
 from agent.world import build_sdf
 from bridge import natnet
 from bridge.carlink import CommandSender, Flags
+from bridge.guard import speed_cap
 from bridge.natnet_client import NatNetClient, NatNetClientOptions
 from bridge.tracking import track
 
@@ -80,6 +83,8 @@ class ControlStats:
     sent: int = 0
     stops: int = 0
     stale_pose_stops: int = 0
+    guard_limited: int = 0
+    """Ticks whose forward speed the proximity guard lowered (bridge.guard)."""
     late_ms: deque = field(default_factory=lambda: deque(maxlen=100_000))
     """Lateness of the latest ticks (bounded: a lab run may last hours)."""
     started: float = 0.0
@@ -90,7 +95,7 @@ class ControlStats:
         late = np.array(self.late_ms) if self.late_ms else np.zeros(1)
         return {
             "sent": self.sent, "stops": self.stops, "stale_pose_stops": self.stale_pose_stops,
-            "rate_hz": round(self.sent / elapsed, 2),
+            "guard_limited": self.guard_limited, "rate_hz": round(self.sent / elapsed, 2),
             "jitter_ms_p50": round(float(np.percentile(late, 50)), 3),
             "jitter_ms_p99": round(float(np.percentile(late, 99)), 3),
             "jitter_ms_max": round(float(np.max(late)), 3),
@@ -173,6 +178,20 @@ class CarProcess:
         return natnet.to_ground_plane(sample.body.position, sample.body.orientation,
                                       self.scenario.natnet.up_axis)
 
+    def _others_seen(self, natnet_client: NatNetClient) -> list[tuple[float, float, float]]:
+        """Fresh, tracked positions of every other car of the fleet."""
+        now_mono, up = time.monotonic(), self.scenario.natnet.up_axis
+        others = []
+        for body_id, sample in natnet_client.latest_all().items():
+            car_id = self._bodies.get(body_id)
+            if (car_id is None or car_id == self.car.id or not sample.body.tracking_valid
+                    or now_mono - sample.received_s > self.scenario.control.pose_timeout_s):
+                continue
+            x, y, yaw = natnet.to_ground_plane(sample.body.position, sample.body.orientation, up)
+            if math.isfinite(x) and math.isfinite(y) and math.isfinite(yaw):
+                others.append((x, y, yaw))
+        return others
+
     def _control_loop(self, natnet_client: NatNetClient, sender: CommandSender) -> None:
         self.control.started = time.monotonic()
         for deadline, now_mono in ticks(1.0 / self.scenario.control.command_rate_hz, self.stop):
@@ -198,6 +217,11 @@ class CarProcess:
         else:
             v, omega = track(plan, now, pose[0], pose[1], pose[2], self.scenario.tracking,
                              self.scenario.vehicle)
+            if self.scenario.guard.enabled:
+                cap = speed_cap(*pose, self._others_seen(natnet_client), self.scenario.guard)
+                if v > cap:
+                    v = cap
+                    self.control.guard_limited += 1
             sender.send(v, omega)
             self._watch_motion(now, pose, v)
         self.control.sent += 1
@@ -323,6 +347,7 @@ class CarProcess:
         counters |= {f"inbox_{k}": v for k, v in self.inbox.dropped.items()}
         counters["commands_sent"] = self.control.sent
         counters["stale_pose_stops"] = self.control.stale_pose_stops
+        counters["guard_limited"] = self.control.guard_limited
         now = self.clock()
         for peer, view in self.agent.peers.items():  # how fresh each peer's plan is, for resync checks
             counters[f"plan_age_ms_{peer}"] = int(min(1e9, max(0.0, now - view.accepted_received) * 1e3))

@@ -264,6 +264,31 @@ class VehicleConfig:
 
 
 @dataclass(frozen=True)
+class GuardConfig:
+    """The car process's last line of defence (bridge.guard): whatever the plan says, a car
+    never drives faster than it can stop before another car seen ahead of it. Off in the
+    in-process experiments, which measure the planner's own factors."""
+
+    enabled: bool = True
+    stop_distance_m: float = 0.30
+    """Centre distance at which a car must have stopped (radii + 0.1 m clearance)."""
+    decel_mps2: float = 1.0
+    """Braking the guard counts on (below the vehicle's max_accel_mps2, for margin)."""
+    reaction_s: float = 0.1
+    """Pose age plus command latency the guard allows for before braking starts."""
+    cone_deg: float = 60.0
+    """Another car counts as ahead within this angle of the heading, either side."""
+
+    def validate(self, path: str) -> None:
+        for name in ("stop_distance_m", "decel_mps2"):
+            _positive(getattr(self, name), f"{path}.{name}")
+        if self.reaction_s < 0:
+            raise ConfigError(f"{path}.reaction_s: must be >= 0")
+        if not 0.0 < self.cone_deg <= 180.0:
+            raise ConfigError(f"{path}.cone_deg: must be within (0, 180]")
+
+
+@dataclass(frozen=True)
 class TrackingConfig:
     """Gains of the unicycle trajectory-tracking controller (bridge.tracking)."""
 
@@ -406,6 +431,7 @@ class Scenario:
     trust: TrustConfig = field(default_factory=TrustConfig)
     vehicle: VehicleConfig = field(default_factory=VehicleConfig)
     tracking: TrackingConfig = field(default_factory=TrackingConfig)
+    guard: GuardConfig = field(default_factory=GuardConfig)
     sim: SimConfig = field(default_factory=SimConfig)
     control: ControlConfig = field(default_factory=ControlConfig)
     bus: BusConfig = field(default_factory=BusConfig)
@@ -423,7 +449,7 @@ class Scenario:
         bodies = [car.body_id for car in self.cars]
         if len(set(bodies)) != len(bodies):
             raise ConfigError(f"{prefix}cars: rigid-body ids must be unique, got {bodies}")
-        for name in ("world", "planner", "trust", "vehicle", "tracking", "sim", "control", "bus", "natnet"):
+        for name in ("world", "planner", "trust", "vehicle", "tracking", "guard", "sim", "control", "bus", "natnet"):
             getattr(self, name).validate(prefix + name)
 
     def car(self, car_id: int) -> CarConfig:

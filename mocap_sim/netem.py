@@ -53,6 +53,24 @@ def sh(*argv: str, stdin: str | None = None, check: bool = True) -> subprocess.C
     return done
 
 
+def _remove_namespace(name: str, within_s: float = 5.0) -> None:
+    """Kill what still runs in a namespace and delete it. ``ip netns del`` fails (EBUSY)
+    while a process started by ``ip netns exec`` lives, since its own mount namespace still
+    holds the namespace's mount point; so retry until the killed processes are gone."""
+    deadline = time.monotonic() + within_s
+    while True:
+        for pid in sh("ip", "netns", "pids", name, check=False).stdout.split():
+            with contextlib.suppress(ProcessLookupError, ValueError):
+                os.kill(int(pid), 9)
+        done = sh("ip", "netns", "del", name, check=False)
+        if done.returncode == 0 or "No such file" in done.stderr:
+            return
+        if time.monotonic() > deadline:
+            log.error("could not remove network namespace %s: %s", name, done.stderr.strip())
+            return
+        time.sleep(0.1)
+
+
 @dataclass
 class Lab:
     car_ids: list[int]
@@ -104,7 +122,7 @@ class Lab:
             relay.close()
         for kind, name in reversed(self.created):
             if kind == "netns":
-                sh("ip", "netns", "del", name, check=False)
+                _remove_namespace(name)
             else:
                 sh("ip", "link", "del", name, check=False)
         self.created.clear()
