@@ -216,11 +216,14 @@ class DelayRelay:
         try:
             self._loop.run_forever()
         finally:
+            # Cancel every connection and wait for them to finish here: a task left pending
+            # would be finalised later by the garbage collector, in whatever thread runs it.
             self._server.close()
-            for task in asyncio.all_tasks(self._loop):
+            tasks = asyncio.all_tasks(self._loop)
+            for task in tasks:
                 task.cancel()
-            with contextlib.suppress(Exception):
-                self._loop.run_until_complete(asyncio.sleep(0))
+            self._loop.run_until_complete(asyncio.gather(*tasks, return_exceptions=True))
+            self._loop.run_until_complete(self._server.wait_closed())
             self._loop.close()
 
     async def _serve(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
