@@ -136,7 +136,12 @@ class PlannerConfig:
     sigma_start_velocity: float = 0.05
     sigma_goal: float = 0.01
     sigma_goal_velocity: float = 0.01
-    sigma_obstacle: float = 0.01
+    sigma_obstacle: float = 0.003
+    """Walls are certain and do not move; peers' plans are guesses when late, and their
+    berth (up to eps_0 * g_max) holds margin. So where both cannot be kept -- a wide berth
+    around a predicted peer in a narrow street -- a plan gives way to the peer, by
+    (sigma_obstacle / sigma_proximity)^2 ~ 1/11 as much into the wall (the proximity guard
+    keeps the cars apart)."""
     sigma_proximity: float = 0.01
     sigma_consistency: float = 0.2
     """Sigma of the consistency residual, in m/s^2."""

@@ -28,6 +28,7 @@ Measured per run, from mocap-sim's ground truth and the recorded messages:
                       plan younger than 1 s from every peer: plans resynchronised
     honest_trust_min  least trust any car still reports in any peer at the end: silence
                       and loss must not read as lying
+    wall_clearance_m  least distance from a car's edge to a building (negative: into it)
 """
 
 from __future__ import annotations
@@ -172,6 +173,7 @@ def measure(case: Case, summary: dict, out: Path) -> dict:
         "goals": sum(summary["reached_goal"]), "cars": len(ids), "crashed": summary["crashed"],
         "time_to_stop_s": None, "time_to_recover_s": None,
         "honest_trust_min": min((v for r in summary["trust"] for v in r if v is not None), default=None),
+        "wall_clearance_m": summary["obstacle_min_clearance"],
     }
     events = summary.get("events", [])
     fault = next((t for t, what in events if what.startswith("fault:")), None)
@@ -228,7 +230,8 @@ def table(rows: list[dict]) -> str:
     for row in rows:
         by_case.setdefault(row["case"], []).append(row)
     lines = ["| fault | runs | breaches | goals reached | max time to stop (s) | max time to recover (s) "
-             "| least trust reported | crashed |", "| --- | --- | --- | --- | --- | --- | --- | --- |"]
+             "| least trust reported | least wall clearance (m) | crashed |",
+             "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
     for name, group in by_case.items():
         stops = [r["time_to_stop_s"] for r in group if r["time_to_stop_s"] is not None]
         recovers = [r["time_to_recover_s"] for r in group]
@@ -240,7 +243,8 @@ def table(rows: list[dict]) -> str:
         cells = [name, len(group), sum(r["breaches"] for r in group),
                  f"{sum(r['goals'] for r in group)}/{sum(r['cars'] for r in group)}",
                  f"{max(stops):.3f}" if stops else "-", recover,
-                 f"{min(trust):.2f}" if trust else "-", sum(len(r["crashed"]) for r in group)]
+                 f"{min(trust):.2f}" if trust else "-", f"{min(r['wall_clearance_m'] for r in group):.3f}",
+                 sum(len(r["crashed"]) for r in group)]
         lines.append("| " + " | ".join(map(str, cells)) + " |")
     return "\n".join(lines)
 
