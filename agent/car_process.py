@@ -10,7 +10,7 @@ Threads, each owning what it touches:
   tracking command, or STOP when there is no fresh pose (older than
   ``control.pose_timeout_s``), no plan, no start yet, or the car has arrived; the
   tracking speed is capped by the proximity guard (bridge.guard) against the other cars
-  it sees;
+  it sees and the walls of the map;
 * the main thread runs the agent: it drains frames and messages, gathers evidence,
   replans every ``control.replan_period_s`` and publishes plan, trust, pose and status.
 
@@ -218,7 +218,8 @@ class CarProcess:
             v, omega = track(plan, now, pose[0], pose[1], pose[2], self.scenario.tracking,
                              self.scenario.vehicle)
             if self.scenario.guard.enabled:
-                cap = speed_cap(*pose, self._others_seen(natnet_client), self.scenario.guard)
+                cap = speed_cap(*pose, self._others_seen(natnet_client), self.scenario.guard,
+                                self.agent.sdf, self.car.radius_m)
                 if v > cap:
                     v = cap
                     self.control.guard_limited += 1

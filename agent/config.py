@@ -271,8 +271,8 @@ class VehicleConfig:
 @dataclass(frozen=True)
 class GuardConfig:
     """The car process's last line of defence (bridge.guard): whatever the plan says, a car
-    never drives faster than it can stop before another car seen ahead of it. Off in the
-    in-process experiments, which measure the planner's own factors."""
+    never drives faster than it can stop before another car seen ahead of it, or a wall.
+    Off in the in-process experiments, which measure the planner's own factors."""
 
     enabled: bool = True
     stop_distance_m: float = 0.30
@@ -283,12 +283,15 @@ class GuardConfig:
     """Pose age plus command latency the guard allows for before braking starts."""
     cone_deg: float = 60.0
     """Another car counts as ahead within this angle of the heading, either side."""
+    wall_clearance_m: float = 0.05
+    """Gap between the car's edge and a wall at which it must have stopped."""
 
     def validate(self, path: str) -> None:
         for name in ("stop_distance_m", "decel_mps2"):
             _positive(getattr(self, name), f"{path}.{name}")
-        if self.reaction_s < 0:
-            raise ConfigError(f"{path}.reaction_s: must be >= 0")
+        for name in ("reaction_s", "wall_clearance_m"):
+            if getattr(self, name) < 0:
+                raise ConfigError(f"{path}.{name}: must be >= 0")
         if not 0.0 < self.cone_deg <= 180.0:
             raise ConfigError(f"{path}.cone_deg: must be within (0, 180]")
 

@@ -1,4 +1,4 @@
-"""The proximity guard: a speed cap from the poses the car sees, under any plan.
+"""The proximity guard: a speed cap from the poses the car sees and the map, under any plan.
 
 The planner keeps cars apart with soft factors against the plans peers share; when those
 plans are late or missing (heavy loss, a partition) a car plans against guesses. The
@@ -14,6 +14,11 @@ also ahead of j (head-on), both cars close the same gap, so each may use only ha
 it: d - d_stop becomes (d - d_stop) / 2. Cars beside or behind do not limit us (they see
 us ahead and brake themselves), and turning is never limited, so a car held by the guard
 can still turn away.
+
+Walls the same way: d - d_stop is replaced by how far the centre can go straight ahead
+(ray-marched on the signed distance field, 2 cm steps) before its edge comes closer than
+``wall_clearance_m`` to a wall -- or closer than it already is, so a car already near a
+wall may drive along it or away from it, never into it.
 """
 
 from __future__ import annotations
@@ -21,16 +26,23 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable
 
+import numpy as np
+
 from agent.config import GuardConfig
+from agent.world import SignedDistanceField
+
+RAY_STEP_M = 0.02
+RAY_LENGTH_M = 1.5
+"""Beyond the stopping distance from any speed the car can reach (0.8 m/s: 0.4 m)."""
 
 
 def speed_cap(x: float, y: float, yaw: float, others: Iterable[tuple[float, float, float]],
-              config: GuardConfig) -> float:
+              config: GuardConfig, sdf: SignedDistanceField | None = None, radius_m: float = 0.1) -> float:
     """The highest forward speed from which the car at (x, y, yaw) still stops short of
-    every car (x, y, yaw) in ``others`` ahead of it (inf when none is ahead)."""
-    cap = math.inf
+    every car (x, y, yaw) in ``others`` ahead of it and, given the map's ``sdf``, of every
+    wall ahead (inf when nothing is ahead)."""
+    cap = math.inf if sdf is None else stopping_speed(wall_room(x, y, yaw, sdf, radius_m + config.wall_clearance_m), config)
     cos_cone = math.cos(math.radians(config.cone_deg))
-    a, t_r = config.decel_mps2, config.reaction_s
     for ox, oy, oyaw in others:
         dx, dy = ox - x, oy - y
         d = math.hypot(dx, dy)
@@ -39,6 +51,25 @@ def speed_cap(x: float, y: float, yaw: float, others: Iterable[tuple[float, floa
         room = d - config.stop_distance_m
         if d > 0.0 and -(dx * math.cos(oyaw) + dy * math.sin(oyaw)) / d >= cos_cone:
             room /= 2.0  # it faces us too: we share the gap
-        v_max = 0.0 if room <= 0.0 else a * (-t_r + math.sqrt(t_r * t_r + 2.0 * room / a))
-        cap = min(cap, v_max)
+        cap = min(cap, stopping_speed(room, config))
     return cap
+
+
+def stopping_speed(room: float, config: GuardConfig) -> float:
+    """v_max = a (-t_r + sqrt(t_r^2 + 2 room / a)): reaction plus braking distance = room."""
+    if room <= 0.0:
+        return 0.0
+    if math.isinf(room):
+        return math.inf
+    a, t_r = config.decel_mps2, config.reaction_s
+    return a * (-t_r + math.sqrt(t_r * t_r + 2.0 * room / a))
+
+
+def wall_room(x: float, y: float, yaw: float, sdf: SignedDistanceField, keep_m: float) -> float:
+    """How far the centre can go straight ahead before it comes closer to a wall than
+    ``keep_m`` (or than it is now, if nearer); inf if free for RAY_LENGTH_M."""
+    steps = np.arange(1, int(RAY_LENGTH_M / RAY_STEP_M) + 1) * RAY_STEP_M
+    ray = np.array([x, y]) + steps[:, None] * np.array([math.cos(yaw), math.sin(yaw)])
+    limit = min(keep_m, float(sdf.distance(np.array([x, y]))) - 1e-3)
+    blocked = np.flatnonzero(sdf.distance(ray) < limit)
+    return math.inf if blocked.size == 0 else float(steps[blocked[0]] - RAY_STEP_M)

@@ -1,4 +1,5 @@
-"""The proximity guard: its formula, and two blind cars driving at each other under it."""
+"""The proximity guard: its formula, two blind cars driving at each other under it, and a
+blind car driving at a wall."""
 
 import math
 
@@ -6,7 +7,7 @@ import numpy as np
 import pytest
 
 from agent.config import GuardConfig, VehicleConfig
-from bridge.guard import speed_cap
+from bridge.guard import speed_cap, wall_room
 from mocap_sim.vehicle import VehicleState, step
 
 GUARD = GuardConfig()
@@ -75,3 +76,46 @@ def test_two_blind_cars_under_the_guard_keep_the_stop_distance(seed):
     a, b = encounter(seed)
     assert closest_approach(a, b, limits, guard=False) < 0.2  # without it they collide (0.2 m: radii)
     assert closest_approach(a, b, limits, guard=True) >= GUARD.stop_distance_m - 0.01
+
+
+RADIUS = 0.1
+KEEP = RADIUS + GUARD.wall_clearance_m  # centre to wall at the stop
+
+
+def test_wall_room_is_the_distance_to_the_stop_line(intersection_sdf):
+    # The south-east building's west face is x = 0.8 for y <= -0.8.
+    assert wall_room(0.0, -1.5, 0.0, intersection_sdf, KEEP) == pytest.approx(0.8 - KEEP, abs=0.03)
+    assert wall_room(0.0, -1.5, math.pi, intersection_sdf, KEEP) == pytest.approx(0.8 - KEEP, abs=0.03)  # x = -0.8
+    assert wall_room(0.0, -1.5, math.pi / 2, intersection_sdf, KEEP) == math.inf  # up the street: free
+
+
+def test_a_car_near_a_wall_may_drive_along_or_away_from_it_but_not_into_it(intersection_sdf):
+    x = 0.8 - 0.12  # edge 0.02 m from the face, nearer than the guard's clearance
+    assert speed_cap(x, -1.5, math.pi / 2, [], GUARD, intersection_sdf, RADIUS) == math.inf  # along, north
+    assert speed_cap(x, -1.5, math.pi, [], GUARD, intersection_sdf, RADIUS) > 0.5  # away
+    assert speed_cap(x, -1.5, 0.0, [], GUARD, intersection_sdf, RADIUS) == 0.0  # into it
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_a_blind_car_under_the_guard_stops_short_of_the_wall(intersection_sdf, seed):
+    """Full speed at the south-east building from random places and angles; physics at
+    5 ms, commands at 50 Hz from poses 40 ms old."""
+    rng = np.random.default_rng(seed)
+    start = VehicleState(rng.uniform(-0.5, 0.3), rng.uniform(-2.0, -1.4), rng.uniform(-0.3, 0.3), v=0.8)
+    limits = VehicleConfig()
+
+    def least_clearance(guard: bool) -> float:
+        car, history, least, v = start, [start], math.inf, 0.0
+        for i in range(int(3.0 / 0.005)):
+            if i % 4 == 0:
+                seen = history[max(0, len(history) - 9)]
+                v = limits.max_speed_mps
+                if guard:
+                    v = min(v, speed_cap(seen.x, seen.y, seen.yaw, [], GUARD, intersection_sdf, RADIUS))
+            car = step(car, v, 0.0, 0.005, limits)
+            history.append(car)
+            least = min(least, float(intersection_sdf.distance(np.array([car.x, car.y]))) - RADIUS)
+        return least
+
+    assert least_clearance(guard=False) < 0.0  # without it the car drives into the building
+    assert least_clearance(guard=True) >= GUARD.wall_clearance_m - 0.01
