@@ -13,7 +13,7 @@ pytestmark = [pytest.mark.faults,
               pytest.mark.skipif(netem.available() is not None, reason=str(netem.available()))]
 
 STOP_WITHIN_S = 0.25 + 0.02  # the 250 ms watchdog, plus mocap-sim's physics scheduling (5 ms ticks)
-RECOVER_WITHIN_S = 3.0  # plans resynchronised after a heal or restart (measured ~0.8-1.1 s)
+RECOVER_WITHIN_S = 3.0  # plans resynchronised after a heal or restart (measured 0.8-1.4 s)
 TRUST_FLOOR = 0.6  # below the prior (2/3) only by evidence of misbehaviour, never by silence
 
 
