@@ -1,8 +1,9 @@
-"""The car's mind: one agent per car.
+"""One car's mind, pure: no sockets, threads or processes.
 
 It owns planning (a GTSAM factor graph over the car's GP trajectory, with obstacle and
-trust factors), trust estimation in every peer (Beta reputation, testimony fusion), the
-fleet messages and the Zenoh bus they travel on, the in-process fleet simulation and
-the paper's experiments. Hardware I/O lives in ``bridge``; the simulated hardware in
-``mocap_sim``.
+trust factors), trust in every peer (Beta reputation, testimony fusion), what a car sees
+and believes (tracks, peers' plans), the fleet's messages (msgpack codec and inbox), the
+typed configuration of everything, the unicycle model of a car, and the metrics of
+executed motion. The processes that run it live in ``trustfg.fleet``; links to hardware
+in ``trustfg.bridge``.
 """

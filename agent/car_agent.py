@@ -1,10 +1,10 @@
 """One car's agent: what it sees, what it is told, whom it trusts and what it plans.
 
-Pure logic, no I/O: the in-process simulation (agent.fleet_sim) and the car process hand
+Pure logic, no I/O: the in-process simulation (fleet.fleet_sim) and the car process hand
 it observations and decoded messages and ask it for plans and reports at the times they
 choose. All times are seconds on the fleet clock.
 
-How peers' plans are used (DESIGN.md, "Trust" and "Fleet bus"):
+How peers' plans are used (docs/architecture.md, "Trust"):
 * A plan message is checked against where its sender was seen when it sent it (its
   stamp; the observation nearest that time). The discrepancy is transparency evidence
   (graded, agent.trust); a plan delayed past ``stale_after_s`` is dropped unjudged. A plan that
@@ -40,14 +40,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from agent import misbehaviour
-from agent.config import CarConfig, Scenario
-from agent.gp import Plan
-from agent.messages import PlanMessage, TrustReport
-from agent.planner import PeerConstraint, PlanningError, PlanRequest, PlanResult, plan_trajectory
-from agent.track import Track
-from agent.trust import CONSISTENCY, SAFETY, TRANSPARENCY, TrustBook, graded
-from agent.world import SignedDistanceField
+from trustfg.agent import misbehaviour
+from trustfg.agent.config import CarConfig, Scenario
+from trustfg.agent.gp import Plan, standing
+from trustfg.agent.messages import PlanMessage, TrustReport
+from trustfg.agent.planner import PeerConstraint, PlanningError, PlanRequest, PlanResult, plan_trajectory
+from trustfg.agent.track import Track
+from trustfg.agent.trust import CONSISTENCY, SAFETY, TRANSPARENCY, TrustBook, graded
+from trustfg.agent.world import SignedDistanceField
 
 log = logging.getLogger(__name__)
 
@@ -103,6 +103,7 @@ class CarAgent:
         self.at_goal = False
         self._seq = Counter()
         self._last_evidence = -np.inf
+        self.radii = {c.id: c.radius_m for c in self.scenario.cars}
         self.set_departure(self.depart_at, self.cruise_speed_mps or self.scenario.planner.cruise_speed_mps)
 
     def set_departure(self, depart_at: float, cruise_speed_mps: float) -> None:
@@ -171,10 +172,12 @@ class CarAgent:
         for peer, motion in motions.items():
             if peer == self.car.id:
                 continue
-            others = [m.position for cid, m in motions.items() if cid != peer]
+            others = [(m.position, self.radius(cid)) for cid, m in motions.items() if cid != peer]
             if others:
-                closest = min(float(np.linalg.norm(motion.position - p)) for p in others)
-                breach = closest < config.safety_distance_m
+                # Does the peer keep the required clearance from every car it is near?
+                margin = min(float(np.linalg.norm(motion.position - p))
+                             - self.scenario.safety.breach_distance(self.radius(peer), r) for p, r in others)
+                breach = margin < 0.0
                 self.trust.record(peer, SAFETY, 0.0 if breach else 1.0, 1.0 if breach else 0.0, now)
             view = self.peers.get(peer)
             if view is not None:
@@ -186,19 +189,27 @@ class CarAgent:
 
     # --- planning ---------------------------------------------------------------------------
 
+    def radius(self, car_id: int) -> float:
+        """A car's radius (a car the scenario does not know is taken to be our size)."""
+        return self.radii.get(car_id, self.car.radius_m)
+
+    def epsilon_0(self, peer: int) -> float:
+        """The distance we keep from a fully trusted ``peer`` (SafetyConfig)."""
+        return self.scenario.safety.epsilon_0(self.car.radius_m, self.radius(peer))
+
     def peer_constraints(self, now: float) -> list[tuple[int, PeerConstraint]]:
         """Every peer we plan around, with the plan we believe and the distance to keep."""
         planner, trust = self.scenario.planner, self.scenario.trust
-        widest = planner.epsilon_m * trust.epsilon_gain_max
         constraints = []
         for peer in sorted(set(self.peers) | set(self.tracks)):
             if peer == self.car.id:
                 continue
             view = self.peers.get(peer)
             if view and view.accepted is not None and now - view.accepted_received <= trust.stale_after_s:
-                epsilon = self.trust.epsilon(peer, now, planner.epsilon_m, planner.transparency)
+                epsilon = self.trust.epsilon(peer, now, self.epsilon_0(peer), planner.transparency)
                 constraints.append((peer, PeerConstraint(view.accepted, epsilon)))
                 continue
+            widest = self.epsilon_0(peer) * trust.epsilon_gain_max
             predicted = self._predict_from_observation(peer, now)
             if predicted is not None:
                 self.counters["peers_predicted"] += 1
@@ -228,7 +239,7 @@ class CarAgent:
         if self.at_goal or (np.linalg.norm(motion.position - goal) <= self.scenario.tracking.goal_tolerance_m
                             and now >= self.depart_at):
             self.at_goal = True
-            self.plan = _standing(motion.position, now)
+            self.plan = standing(motion.position, now)
             return None
         t0 = max(now, self.depart_at)
         position, velocity = self._start_state(motion, t0, now)
@@ -240,7 +251,7 @@ class CarAgent:
         peers = tuple(c for _, c in self.peer_constraints(now))
         request = PlanRequest(
             t_now=t0, position=position, velocity=velocity, goal=goal, t_arrive=t_arrive,
-            peers=peers, warm_start=self.plan, route=self.car.route,
+            epsilon_obstacle=self.scenario.safety.epsilon_obstacle(self.car.radius_m), peers=peers, warm_start=self.plan, route=self.car.route,
             lane=(self.car.start, *self.car.route),
         )
         try:
@@ -293,9 +304,8 @@ class CarAgent:
                            (float(self.car.goal[0]), float(self.car.goal[1])))
 
     def trust_message(self, now: float) -> TrustReport:
-        planner = self.scenario.planner
-        report = self.trust.report(self.car.id, self.next_seq("trust"), now, planner.epsilon_m,
-                                   planner.transparency)
+        report = self.trust.report(self.car.id, self.next_seq("trust"), now, self.epsilon_0,
+                                   self.scenario.planner.transparency)
         if self.car.false_testimony:
             report = misbehaviour.falsify_testimony(report)
         return report
@@ -325,8 +335,3 @@ def _acceleration_mismatch(view: PeerView, fresh_s: float) -> float | None:
     change = (observed - observed_old) - (v_now - v_then)
     return float(np.linalg.norm(change)) / (t - t_old)
 
-
-def _standing(position: np.ndarray, now: float) -> Plan:
-    """The plan of a car that has arrived: stay where it is."""
-    n = 3
-    return Plan(t0=now, dt=1.0, positions=np.tile(position, (n, 1)), velocities=np.zeros((n, 2)))

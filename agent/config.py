@@ -13,13 +13,9 @@ Layering: built-in defaults <- scenario file <- command-line overrides
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
-import tomllib
-import types
-import typing
+import re
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 
@@ -103,6 +99,15 @@ class CarConfig:
     def body_id(self) -> int:
         return self.rigid_body or self.id
 
+    @property
+    def start_heading(self) -> float:
+        """Heading at the start: ``start_heading_rad``, else towards the first via point
+        (or the goal)."""
+        if self.start_heading_rad is not None:
+            return self.start_heading_rad
+        target = self.route[0] if self.route else self.goal
+        return math.atan2(target[1] - self.start[1], target[0] - self.start[0])
+
     def validate(self, path: str) -> None:
         if not 1 <= self.id <= 255:
             raise ConfigError(f"{path}.id: must be within 1..255, got {self.id}")
@@ -116,8 +121,49 @@ class CarConfig:
 
 
 @dataclass(frozen=True)
+class SafetyConfig:
+    """The distances that keep cars apart, all derived from the cars' radii and one
+    required clearance (every component reads them from here):
+
+        breach distance   d_ab     = r_a + r_b + clearance_m           (centres; closer is a breach)
+        planner           eps_0,ab = d_ab + peer_margin_m              (proximity hinge, trusted peer)
+        planner, walls    eps_obs  = r + clearance_m + obstacle_margin_m  (centre to surface)
+        guard             d_stop   = d_ab + guard.stop_margin_m        (must have stopped by then)
+
+    With the default 0.1 m radii: d_ab = 0.3 m, eps_0 = 0.45 m, eps_obs = 0.25 m, d_stop = 0.35 m.
+    """
+
+    clearance_m: float = 0.1
+    """Required gap between two cars' edges; less is a breach (metrics, trust's safety
+    evidence, the dashboard's alerts)."""
+    peer_margin_m: float = 0.15
+    """What a plan keeps beyond the breach distance from a fully trusted peer's plan:
+    room for tracking error and the peer's plan changing before we hear of it."""
+    obstacle_margin_m: float = 0.05
+    """What a plan keeps beyond the clearance from walls and obstacles."""
+
+    def validate(self, path: str) -> None:
+        _positive(self.clearance_m, f"{path}.clearance_m")
+        for name in ("peer_margin_m", "obstacle_margin_m"):
+            if getattr(self, name) < 0:
+                raise ConfigError(f"{path}.{name}: must be >= 0")
+
+    def breach_distance(self, radius_a: float, radius_b: float) -> float:
+        """Centre distance below which two cars breach the clearance."""
+        return radius_a + radius_b + self.clearance_m
+
+    def epsilon_0(self, radius_a: float, radius_b: float) -> float:
+        """eps_0: the proximity hinge's threshold for a fully trusted peer (centres)."""
+        return (radius_a + radius_b) + (self.clearance_m + self.peer_margin_m)
+
+    def epsilon_obstacle(self, radius: float) -> float:
+        """The obstacle hinge's threshold, centre to surface."""
+        return radius + (self.clearance_m + self.obstacle_margin_m)
+
+
+@dataclass(frozen=True)
 class PlannerConfig:
-    """The factor graph of one car (DESIGN.md, Planning). Sigmas are the standard
+    """The factor graph of one car (docs/architecture.md, "The planner"). Sigmas are the standard
     deviations of each factor's noise model: smaller means stiffer."""
 
     support_states: int = 21
@@ -148,11 +194,6 @@ class PlannerConfig:
     sigma_speed: float = 0.02
     sigma_lane: float = 0.15
     """Sigma of the pull towards the lane centre line, m."""
-    epsilon_obstacle_m: float = 0.25
-    """Hinge threshold to obstacles, centre to surface: radius + clearance + margin."""
-    epsilon_m: float = 0.45
-    """epsilon_0: proximity hinge threshold between two centres for a fully trusted peer
-    (two radii 0.2 + required clearance 0.1 + margin for tracking and latency)."""
     max_iterations: int = 30
     relative_error_tol: float = 1e-3
     """LM stops when an iteration lowers the error by less than this fraction; replanning
@@ -182,8 +223,7 @@ class PlannerConfig:
         for name in (
             "qc", "min_horizon_s", "cruise_speed_mps", "max_speed_mps", "sigma_start",
             "sigma_start_velocity", "sigma_goal", "sigma_goal_velocity", "sigma_obstacle",
-            "sigma_proximity", "sigma_consistency", "sigma_speed", "sigma_lane", "epsilon_obstacle_m",
-            "epsilon_m", "relative_error_tol", "absolute_error_tol", "lambda_initial",
+            "sigma_proximity", "sigma_consistency", "sigma_speed", "sigma_lane", "relative_error_tol", "absolute_error_tol", "lambda_initial",
         ):
             _positive(getattr(self, name), f"{path}.{name}")
         if self.lambda_factor <= 1.0:
@@ -196,7 +236,7 @@ class PlannerConfig:
 
 @dataclass(frozen=True)
 class TrustConfig:
-    """Beta reputation per peer and dimension (DESIGN.md, Trust)."""
+    """Beta reputation per peer and dimension (docs/architecture.md, "Trust")."""
 
     forgetting: float = 0.85
     """lambda per second: evidence of age s weighs lambda**s (0.85: half-life ~4.3 s)."""
@@ -217,8 +257,6 @@ class TrustConfig:
     planned against; the last plan that agreed (or the observed motion) is used."""
     consistency_tolerance_mps2: float = 0.6
     """Observed vs planned acceleration mismatch that still counts as consistent."""
-    safety_distance_m: float = 0.30
-    """Centre distance below which a pair breached safety (radii + 0.1 m clearance)."""
     evidence_period_s: float = 0.1
     stale_after_s: float = 1.0
     """A peer with no plan for this long is predicted from its observed motion and
@@ -245,7 +283,7 @@ class TrustConfig:
             raise ConfigError(f"{path}.epsilon_gain_max: must be >= 1")
         for name in (
             "transparency_tolerance_m", "plan_reject_m", "consistency_tolerance_mps2",
-            "safety_distance_m", "evidence_period_s", "stale_after_s", "testimony_deviation",
+            "evidence_period_s", "stale_after_s", "testimony_deviation",
         ):
             _positive(getattr(self, name), f"{path}.{name}")
 
@@ -275,9 +313,9 @@ class GuardConfig:
     Off in the in-process experiments, which measure the planner's own factors."""
 
     enabled: bool = True
-    stop_distance_m: float = 0.35
-    """Centre distance at which a car must have stopped: radii + the 0.1 m clearance + 0.05 m
-    for pose noise and latency (stopping right at the breach line breached it by 3 mm in a
+    stop_margin_m: float = 0.05
+    """How far beyond the breach distance (SafetyConfig) a car must have stopped, for pose
+    noise and latency (stopping right at the breach line breached it by 3 mm in a
     partition run)."""
     decel_mps2: float = 1.0
     """Braking the guard counts on (below the vehicle's max_accel_mps2, for margin)."""
@@ -289,9 +327,8 @@ class GuardConfig:
     """Gap between the car's edge and a wall at which it must have stopped."""
 
     def validate(self, path: str) -> None:
-        for name in ("stop_distance_m", "decel_mps2"):
-            _positive(getattr(self, name), f"{path}.{name}")
-        for name in ("reaction_s", "wall_clearance_m"):
+        _positive(self.decel_mps2, f"{path}.decel_mps2")
+        for name in ("stop_margin_m", "reaction_s", "wall_clearance_m"):
             if getattr(self, name) < 0:
                 raise ConfigError(f"{path}.{name}: must be >= 0")
         if not 0.0 < self.cone_deg <= 180.0:
@@ -309,6 +346,9 @@ class TrackingConfig:
     k_heading: float = 3.0
     """1/s, gain on the heading error."""
     goal_tolerance_m: float = 0.05
+    """A car is at its goal (and at any resting point of its plan) when it sees itself
+    this close; it then stops. The one goal tolerance of trustfg (Scenario.arrival_radius_m
+    derives the judge's from it)."""
 
     def validate(self, path: str) -> None:
         for name in ("k_along", "k_cross", "k_heading", "goal_tolerance_m"):
@@ -341,7 +381,7 @@ class ControlConfig:
 
 @dataclass(frozen=True)
 class BusConfig:
-    """How a process joins the fleet's Zenoh network (DESIGN.md, Fleet bus).
+    """How a process joins the fleet's Zenoh network (docs/architecture.md, "The bus").
 
     Simulation and tests: explicit TCP endpoints on 127.0.0.1 and multicast scouting off.
     Lab: multicast scouting on the Wi-Fi interface, listed endpoints, or a router
@@ -384,8 +424,8 @@ class NatNetConfig:
     local_interface: str = "0.0.0.0"
     """Local address to bind and to join the multicast group on."""
     version: str = ""
-    """NatNet version of the stream when no SERVERINFO is heard ("3.0" .. "4.1"); empty:
-    learn it from the handshake."""
+    """NatNet version of the stream when no SERVERINFO is heard (e.g. "3.1"; the bridge's
+    codec says which it decodes); empty: learn it from the handshake."""
     up_axis: str = "y"
     """Motive's up axis: 'y' (default; ground plane = (x, -z)) or 'z'."""
 
@@ -394,8 +434,8 @@ class NatNetConfig:
             raise ConfigError(f"{path}.mode: expected 'multicast' or 'unicast'")
         if self.up_axis not in ("y", "z"):
             raise ConfigError(f"{path}.up_axis: expected 'y' or 'z'")
-        if self.version and self.version not in ("3.0", "3.1", "4.0", "4.1"):
-            raise ConfigError(f"{path}.version: expected one of 3.0, 3.1, 4.0, 4.1")
+        if self.version and not re.fullmatch(r"\d{1,3}\.\d{1,3}", self.version):
+            raise ConfigError(f"{path}.version: expected MAJOR.MINOR like \"3.1\", got {self.version!r}")
         for name in ("command_port", "data_port"):
             if not 0 <= getattr(self, name) <= 65535:
                 raise ConfigError(f"{path}.{name}: not a port number")
@@ -403,14 +443,12 @@ class NatNetConfig:
 
 @dataclass(frozen=True)
 class SimConfig:
-    """The in-process fleet simulation (agent.fleet_sim)."""
+    """Both simulations: the in-process fleet (fleet.fleet_sim, which steps physics and
+    control at ``control.command_rate_hz``) and the departures ``trustfg sim`` draws."""
 
-    step_s: float = 0.02
-    """Physics and control period (50 Hz, the rate commands are sent at)."""
     observation_noise_m: float = 0.002
     message_latency_s: float = 0.02
     timeout_s: float = 45.0
-    goal_tolerance_m: float = 0.10
     start_delay_max_s: float = 2.0
     """Each car waits U(0, this) before it moves: desynchronised starts per seed. On the
     intersection's right-hand lanes two crossing cars that start together reach their
@@ -420,8 +458,7 @@ class SimConfig:
     """Each car's cruise speed is drawn from this range per seed."""
 
     def validate(self, path: str) -> None:
-        for name in ("step_s", "timeout_s", "goal_tolerance_m"):
-            _positive(getattr(self, name), f"{path}.{name}")
+        _positive(self.timeout_s, f"{path}.timeout_s")
         if self.observation_noise_m < 0 or self.message_latency_s < 0 or self.start_delay_max_s < 0:
             raise ConfigError(f"{path}: noise, latency and delay must be >= 0")
         lo, hi = self.cruise_speed_range_mps
@@ -439,6 +476,7 @@ class Scenario:
     world: WorldConfig = field(default_factory=WorldConfig)
     planner: PlannerConfig = field(default_factory=PlannerConfig)
     trust: TrustConfig = field(default_factory=TrustConfig)
+    safety: SafetyConfig = field(default_factory=SafetyConfig)
     vehicle: VehicleConfig = field(default_factory=VehicleConfig)
     tracking: TrackingConfig = field(default_factory=TrackingConfig)
     guard: GuardConfig = field(default_factory=GuardConfig)
@@ -459,7 +497,7 @@ class Scenario:
         bodies = [car.body_id for car in self.cars]
         if len(set(bodies)) != len(bodies):
             raise ConfigError(f"{prefix}cars: rigid-body ids must be unique, got {bodies}")
-        for name in ("world", "planner", "trust", "vehicle", "tracking", "guard", "sim", "control", "bus", "natnet"):
+        for name in ("world", "safety", "planner", "trust", "vehicle", "tracking", "guard", "sim", "control", "bus", "natnet"):
             getattr(self, name).validate(prefix + name)
 
     def car(self, car_id: int) -> CarConfig:
@@ -468,31 +506,21 @@ class Scenario:
                 return car
         raise ConfigError(f"cars: no car with id {car_id} (have {[c.id for c in self.cars]})")
 
+    @property
+    def arrival_radius_m(self) -> float:
+        """How close to its goal the judge (metrics on ground truth) counts a car as
+        arrived: twice the car's own goal tolerance -- the car stops once it *sees* itself
+        within the tolerance, so its true position may be off by pose error and braking."""
+        return 2.0 * self.tracking.goal_tolerance_m
 
-# ---------------------------------------------------------------------------------------
-# Loading
-# ---------------------------------------------------------------------------------------
-
-
-def load_scenario(path: str | Path) -> Scenario:
-    """Read a scenario TOML file; raise ConfigError naming the file and the bad key."""
-    path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: no such scenario file") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: not valid TOML: {exc}") from None
-    try:
-        return scenario_from_dict(data)
-    except ConfigError as exc:
-        raise ConfigError(f"{path}: {exc}") from None
+    def car_colors(self) -> list[str]:
+        """Every car's colour (matplotlib names): its own, else the next of PALETTE."""
+        return [car.color or PALETTE[i % len(PALETTE)] for i, car in enumerate(self.cars)]
 
 
-def scenario_from_dict(data: dict[str, Any]) -> Scenario:
-    scenario = from_dict(Scenario, data, "")
-    scenario.validate()
-    return scenario
+PALETTE = ("tab:blue", "tab:green", "tab:red", "tab:orange", "tab:purple", "tab:brown", "tab:pink",
+           "tab:olive", "tab:cyan", "tab:gray")
+"""Colours of cars that do not name their own, in order (figures and the dashboard)."""
 
 
 def with_overrides(obj: Any, **changes: Any) -> Any:
@@ -501,64 +529,6 @@ def with_overrides(obj: Any, **changes: Any) -> Any:
     if hasattr(new, "validate"):
         new.validate(type(new).__name__)
     return new
-
-
-def from_dict(cls: type, data: Any, path: str) -> Any:
-    """Build dataclass ``cls`` from plain TOML data, strictly (unknown keys refused)."""
-    if not isinstance(data, dict):
-        raise ConfigError(f"{path or 'top level'}: expected a table, got {_describe(data)}")
-    hints = typing.get_type_hints(cls)
-    fields = {f.name: f for f in dataclasses.fields(cls)}
-    unknown = sorted(set(data) - set(fields))
-    if unknown:
-        raise ConfigError(f"{_join(path, unknown[0])}: unknown key (known: {', '.join(sorted(fields))})")
-    kwargs = {}
-    for name, f in fields.items():
-        key_path = _join(path, name)
-        if name in data:
-            kwargs[name] = _convert(hints[name], data[name], key_path)
-        elif f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
-            raise ConfigError(f"{key_path}: missing required key")
-    return cls(**kwargs)
-
-
-def _convert(tp: Any, value: Any, path: str) -> Any:
-    origin = typing.get_origin(tp)
-    args = typing.get_args(tp)
-    if origin in (typing.Union, types.UnionType):
-        if value is None and type(None) in args:
-            return None
-        inner = [a for a in args if a is not type(None)]
-        return _convert(inner[0], value, path)
-    if dataclasses.is_dataclass(tp):
-        return from_dict(tp, value, path)
-    if tp is float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ConfigError(f"{path}: expected a number, got {_describe(value)}")
-        if not math.isfinite(value):
-            raise ConfigError(f"{path}: expected a finite number, got {value}")
-        return float(value)
-    if tp is int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise ConfigError(f"{path}: expected an integer, got {_describe(value)}")
-        return value
-    if tp is bool:
-        if not isinstance(value, bool):
-            raise ConfigError(f"{path}: expected true or false, got {_describe(value)}")
-        return value
-    if tp is str:
-        if not isinstance(value, str):
-            raise ConfigError(f"{path}: expected a string, got {_describe(value)}")
-        return value
-    if origin is tuple:
-        if not isinstance(value, list):
-            raise ConfigError(f"{path}: expected an array, got {_describe(value)}")
-        if len(args) == 2 and args[1] is Ellipsis:
-            return tuple(_convert(args[0], v, f"{path}[{i}]") for i, v in enumerate(value))
-        if len(value) != len(args):
-            raise ConfigError(f"{path}: expected {len(args)} values, got {len(value)}")
-        return tuple(_convert(a, v, f"{path}[{i}]") for i, (a, v) in enumerate(zip(args, value)))
-    raise ConfigError(f"{path}: unsupported config type {tp!r}")  # a bug in this module
 
 
 def parse_udp_address(text: str, path: str = "address") -> tuple[str, int]:
@@ -574,47 +544,3 @@ def parse_udp_address(text: str, path: str = "address") -> tuple[str, int]:
 def _positive(value: float, path: str) -> None:
     if not value > 0:
         raise ConfigError(f"{path}: must be > 0, got {value}")
-
-
-def _join(path: str, name: str) -> str:
-    return f"{path}.{name}" if path else name
-
-
-def _describe(value: Any) -> str:
-    text = repr(value)
-    return text if len(text) <= 40 else text[:37] + "..."
-
-
-def dump_scenario(scenario: Scenario) -> str:
-    """TOML text that load_scenario reads back into an equal Scenario."""
-    lines: list[str] = []
-    top = {f.name: getattr(scenario, f.name) for f in dataclasses.fields(scenario)}
-    for name, value in top.items():
-        if not dataclasses.is_dataclass(value) and name != "cars":
-            lines.append(f"{name} = {_toml_value(value)}")
-    for name, value in top.items():
-        if dataclasses.is_dataclass(value):
-            lines.append(f"\n[{name}]")
-            lines.extend(f"{k} = {_toml_value(v)}" for k, v in _fields(value).items())
-    for car in scenario.cars:
-        lines.append("\n[[cars]]")
-        lines.extend(f"{k} = {_toml_value(v)}" for k, v in _fields(car).items())
-    return "\n".join(lines) + "\n"
-
-
-def _fields(obj: Any) -> dict[str, Any]:
-    return {f.name: getattr(obj, f.name) for f in dataclasses.fields(obj) if getattr(obj, f.name) is not None}
-
-
-def _toml_value(value: Any) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, (int, float)):
-        return repr(value)
-    if isinstance(value, str):
-        return json.dumps(value)  # a JSON string is a valid TOML basic string
-    if isinstance(value, (tuple, list)):
-        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
-    if dataclasses.is_dataclass(value):
-        return "{ " + ", ".join(f"{k} = {_toml_value(v)}" for k, v in _fields(value).items()) + " }"
-    raise TypeError(f"cannot write {type(value).__name__} to TOML")

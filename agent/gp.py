@@ -135,3 +135,10 @@ class Plan:
 
     def shifted(self, offset: np.ndarray) -> "Plan":
         return Plan(self.t0, self.dt, self.positions + np.asarray(offset), self.velocities.copy())
+
+
+def standing(position: np.ndarray, t: float) -> Plan:
+    """The plan of a car that stays where it is from time t on (arrived, waiting, stuck)."""
+    n = 3
+    return Plan(t0=t, dt=1.0, positions=np.tile(np.asarray(position, dtype=float), (n, 1)),
+                velocities=np.zeros((n, 2)))

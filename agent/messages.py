@@ -40,7 +40,7 @@ from typing import Any, Union
 import msgpack
 import numpy as np
 
-from agent.gp import Plan
+from trustfg.agent.gp import Plan
 
 SCHEMA_VERSION = 1
 MAX_MESSAGE_BYTES = 64 * 1024

@@ -1,7 +1,8 @@
-"""The fleet's report card, computed from executed motion (DESIGN.md, Experiments).
+"""The fleet's report card, computed from executed motion.
 
     min distance   D[a][b] = min_t |p_a(t) - p_b(t)|, centre to centre (m)
-    clearance      C[a][b] = D[a][b] - r_a - r_b; a breach is C < BREACH_CLEARANCE_M
+    clearance      C[a][b] = D[a][b] - r_a - r_b; a breach is C < the required clearance
+                   (SafetyConfig.clearance_m)
     obstacles      min over cars and time of d(p_a(t)) - r_a, d the signed distance field
     inconsistency  I = sum_t sigma(t) / sum_t mu(t), where mu(t) and sigma(t) are the mean
                    and the population standard deviation of the acceleration magnitudes
@@ -16,9 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from agent.world import SignedDistanceField
+from trustfg.agent.world import SignedDistanceField
 
-BREACH_CLEARANCE_M = 0.1
 ACCEL_WINDOW_S = 0.2
 
 
@@ -36,10 +36,24 @@ def clearance_matrix(distance: np.ndarray, radii: np.ndarray) -> np.ndarray:
     return clearance
 
 
-def breaches(clearance: np.ndarray, ids: list[int], threshold: float = BREACH_CLEARANCE_M
-             ) -> list[list[int]]:
+def breaches(clearance: np.ndarray, ids: list[int], threshold: float) -> list[list[int]]:
+    """Pairs [a, b] (a before b) whose clearance fell below ``threshold``."""
     n = len(ids)
     return [[ids[a], ids[b]] for a in range(n) for b in range(a + 1, n) if clearance[a, b] < threshold]
+
+
+def breach_distances(radii: np.ndarray, clearance_m: float) -> np.ndarray:
+    """(n, n) centre distances below which each pair breaches (r_a + r_b + clearance)."""
+    radii = np.asarray(radii, dtype=float)
+    return radii[:, None] + radii[None, :] + clearance_m
+
+
+def reached_at(times: np.ndarray, positions: np.ndarray, goals: np.ndarray, radius_m: float
+               ) -> list[float | None]:
+    """Per car, the first time it came within ``radius_m`` of its goal (None: never).
+    ``positions`` (T, n, 2), ``goals`` (n, 2)."""
+    near = np.linalg.norm(positions - np.asarray(goals)[None], axis=-1) <= radius_m  # (T, n)
+    return [float(times[np.argmax(near[:, i])]) if near[:, i].any() else None for i in range(near.shape[1])]
 
 
 def obstacle_min_clearance(positions: np.ndarray, radii: np.ndarray, sdf: SignedDistanceField) -> float:

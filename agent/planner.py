@@ -38,10 +38,10 @@ import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import A, B, V, X
 
-from agent import factors
-from agent.config import PlannerConfig
-from agent.gp import Plan, interpolation_weights
-from agent.world import SignedDistanceField
+from trustfg.agent import factors
+from trustfg.agent.config import PlannerConfig
+from trustfg.agent.gp import Plan, interpolation_weights
+from trustfg.agent.world import SignedDistanceField
 
 
 class PlanningError(RuntimeError):
@@ -64,6 +64,8 @@ class PlanRequest:
     goal: np.ndarray
     t_arrive: float
     """Planned arrival time at the goal (absolute); the horizon is t_arrive - t_now."""
+    epsilon_obstacle: float
+    """Obstacle hinge threshold, centre to surface (SafetyConfig.epsilon_obstacle)."""
     peers: tuple[PeerConstraint, ...] = ()
     warm_start: Plan | None = None
     route: tuple[tuple[float, float], ...] = ()
@@ -83,8 +85,7 @@ class PlanResult:
     warm: bool
 
 
-def plan_trajectory(request: PlanRequest, config: PlannerConfig, sdf: SignedDistanceField,
-                    epsilon_obstacle: float | None = None) -> PlanResult:
+def plan_trajectory(request: PlanRequest, config: PlannerConfig, sdf: SignedDistanceField) -> PlanResult:
     """Solve the trajectory of one car; raise PlanningError on bad input.
 
     A cold start (no previous plan) with many support states is solved coarse to fine:
@@ -97,16 +98,16 @@ def plan_trajectory(request: PlanRequest, config: PlannerConfig, sdf: SignedDist
     n = config.support_states
     if request.warm_start is None and n >= 2 * COARSE_MIN_STATES - 1:
         coarse = dataclasses.replace(config, support_states=(n + 1) // 2)
-        first = plan_trajectory(request, coarse, sdf, epsilon_obstacle)
-        refined = plan_trajectory(dataclasses.replace(request, warm_start=first.plan), config, sdf, epsilon_obstacle)
+        first = plan_trajectory(request, coarse, sdf)
+        refined = plan_trajectory(dataclasses.replace(request, warm_start=first.plan), config, sdf)
         return dataclasses.replace(refined, iterations=first.iterations + refined.iterations,
                                    initial_error=first.initial_error,
                                    time_ms=(time.perf_counter() - started) * 1e3, warm=False)
     horizon = max(request.t_arrive - request.t_now, config.min_horizon_s)
     dt = horizon / (n - 1)
     t0 = request.t_now
-    problem = interval_problem(request, config, sdf, t0, dt, epsilon_obstacle)
-    graph = build_graph(request, config, sdf, t0, dt, epsilon_obstacle, problem)
+    problem = interval_problem(request, config, sdf, t0, dt)
+    graph = build_graph(request, config, sdf, t0, dt, problem)
     if request.warm_start is not None:
         values = _values(anchored(request.warm_start.resampled(t0, dt, n), request.position, request.velocity))
     else:
@@ -151,8 +152,8 @@ def _checks_cost(problem: factors.IntervalProblem, plan: Plan, sigmas: np.ndarra
 
 
 def build_graph(request: PlanRequest, config: PlannerConfig, sdf: SignedDistanceField,
-                t0: float, dt: float, epsilon_obstacle: float | None = None,
-                problem: factors.IntervalProblem | None = None) -> gtsam.NonlinearFactorGraph:
+                t0: float, dt: float, problem: factors.IntervalProblem | None = None
+                ) -> gtsam.NonlinearFactorGraph:
     n = config.support_states
     graph = gtsam.NonlinearFactorGraph()
     iso = gtsam.noiseModel.Isotropic.Sigma
@@ -165,7 +166,7 @@ def build_graph(request: PlanRequest, config: PlannerConfig, sdf: SignedDistance
     for i in range(n - 1):
         graph.add(gtsam.WnoaMotionFactorPoint2(states[i], states[i + 1], qc))
     if problem is None:
-        problem = interval_problem(request, config, sdf, t0, dt, epsilon_obstacle)
+        problem = interval_problem(request, config, sdf, t0, dt)
     if config.interpolation == "batched":
         add_batched_checks(graph, problem, config)
     else:
@@ -174,8 +175,7 @@ def build_graph(request: PlanRequest, config: PlannerConfig, sdf: SignedDistance
 
 
 def interval_problem(request: PlanRequest, config: PlannerConfig, sdf: SignedDistanceField,
-                     t0: float, dt: float, epsilon_obstacle: float | None = None
-                     ) -> factors.IntervalProblem:
+                     t0: float, dt: float) -> factors.IntervalProblem:
     """The constants of every interval's checks for this replan."""
     n = config.support_states
     fractions = factors.check_fractions(config.interp_checks)
@@ -198,7 +198,7 @@ def interval_problem(request: PlanRequest, config: PlannerConfig, sdf: SignedDis
         dt=dt,
         weights=interpolation_weights(dt, fractions),
         sdf=sdf,
-        epsilon_obstacle=config.epsilon_obstacle_m if epsilon_obstacle is None else epsilon_obstacle,
+        epsilon_obstacle=request.epsilon_obstacle,
         peer_positions=peer_positions,
         epsilons=epsilons,
         max_speed=config.max_speed_mps,
@@ -396,6 +396,8 @@ def _check_request(request: PlanRequest) -> None:
             raise PlanningError(f"{name} must be a finite 2-vector, got {value!r}")
     if not (np.isfinite(request.t_now) and np.isfinite(request.t_arrive)):
         raise PlanningError("t_now and t_arrive must be finite")
+    if not (np.isfinite(request.epsilon_obstacle) and request.epsilon_obstacle > 0):
+        raise PlanningError(f"epsilon_obstacle must be positive, got {request.epsilon_obstacle}")
     for peer in request.peers:
         if not (np.isfinite(peer.epsilon) and peer.epsilon > 0):
             raise PlanningError(f"peer epsilon must be positive, got {peer.epsilon}")

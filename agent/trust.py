@@ -38,12 +38,13 @@ so g(1) = 1, g is non-increasing and bounded by g_max.
 from __future__ import annotations
 
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from agent.config import TrustConfig
-from agent.messages import DIMENSIONS, PeerTrust, TrustReport
+from trustfg.agent.config import TrustConfig
+from trustfg.agent.messages import DIMENSIONS, PeerTrust, TrustReport
 
 SAFETY, CONSISTENCY, TRANSPARENCY = range(3)
 
@@ -184,9 +185,10 @@ class TrustBook:
             return epsilon_0
         return epsilon_0 * epsilon_gain(float(self.tau(peer, now)[TRANSPARENCY]), self.config)
 
-    def report(self, sender: int, seq: int, now: float, epsilon_0: float,
+    def report(self, sender: int, seq: int, now: float, epsilon_0: Callable[[int], float],
                transparency: bool) -> TrustReport:
-        """Our testimony: direct evidence (without the prior) plus what we believe."""
+        """Our testimony: direct evidence (without the prior) plus what we believe
+        (``epsilon_0(peer)``: the distance we keep from a fully trusted ``peer``)."""
         peers = {}
         for peer in sorted(self.direct):
             opinion = self.direct[peer]
@@ -197,6 +199,6 @@ class TrustBook:
                 beta=tuple(np.maximum(0.0, opinion.beta - self.config.prior_beta)),
                 tau=tuple(float(x) for x in tau),
                 trust=float(np.min(tau)),
-                epsilon=self.epsilon(peer, now, epsilon_0, transparency),
+                epsilon=self.epsilon(peer, now, epsilon_0(peer), transparency),
             )
         return TrustReport(sender=sender, seq=seq, stamp=now, peers=peers)

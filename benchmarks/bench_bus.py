@@ -7,7 +7,7 @@ Two OS processes on 127.0.0.1 (explicit TCP endpoints, multicast scouting off):
 * raw ping-pong: the sender puts the encoded bytes of a 41-state plan on a raw Zenoh
   key; the echo process puts them straight back from its callback. Round trip and
   one-way (time.monotonic is one clock for every process on a machine).
-* plan propagation: the sender publishes through agent.bus.FleetBus (the cached advanced
+* plan propagation: the sender publishes through trustfg.fleet.bus.FleetBus (the cached advanced
   publisher cars use); the peer drains its FleetBus queue, decodes and validates the
   message (agent.messages.Inbox) and notes the time. One way, publish to decoded.
 
@@ -26,10 +26,10 @@ import time
 import numpy as np
 import zenoh
 
-from agent import messages
-from agent.bus import FleetBus, zenoh_config
-from agent.config import BusConfig
-from agent.gp import Plan
+from trustfg.agent import messages
+from trustfg.agent.config import BusConfig
+from trustfg.agent.gp import Plan
+from trustfg.fleet.bus import FleetBus, zenoh_config
 
 FLEET = "bench"
 

@@ -13,7 +13,7 @@ import time
 from dataclasses import dataclass
 from typing import Callable
 
-from bridge.carlink import Command, CommandFilter, Flags, decode_command, encode_command
+from trustfg.bridge.carlink import Command, CommandFilter, Flags, decode_command, encode_command
 
 
 @dataclass(frozen=True)

@@ -14,8 +14,8 @@ import argparse
 import tempfile
 from pathlib import Path
 
-from agent.config import load_scenario
-from agent.launch import default_scenario, loopback_fleet, run
+from trustfg.agent.scenario_files import load_scenario
+from trustfg.fleet.launch import default_scenario, loopback_fleet, run
 
 
 def main() -> None:

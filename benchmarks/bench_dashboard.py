@@ -21,8 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
-from agent.config import load_scenario
-from agent.launch import default_scenario, free_port, loopback_fleet, run
+from trustfg.agent.scenario_files import load_scenario
+from trustfg.fleet.launch import default_scenario, free_port, loopback_fleet, run
 
 FLAGS = ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run", "--disable-background-networking",
          "--disable-component-update", "--disable-sync"]
@@ -38,7 +38,7 @@ def main() -> None:
         out = Path(folder)
         run(loopback_fleet(load_scenario(default_scenario(8)), 8, None, 0.0), out, seed=0)
         port = free_port()
-        server = subprocess.Popen([sys.executable, "-m", "agent.cli", "dashboard", "--replay", str(out),
+        server = subprocess.Popen([sys.executable, "-m", "trustfg", "dashboard", "--replay", str(out),
                                    "--port", str(port)], stdout=subprocess.DEVNULL)
         try:
             for _ in range(100):

@@ -16,7 +16,7 @@ import time
 from pathlib import Path
 from typing import Callable
 
-from bridge import natnet as nn
+from trustfg.bridge import natnet as nn
 
 TARGET_FPS = 20_000
 CAPTURE = (Path(__file__).resolve().parent.parent / "tests" / "data" / "natnet-captures"

@@ -21,32 +21,29 @@ import argparse
 import dataclasses
 import statistics
 import time
-from pathlib import Path
 
 import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import V, X
 
-from agent import factors
-from agent.config import load_scenario
-from agent.planner import PeerConstraint, PlanRequest, build_graph, interval_problem, plan_trajectory
-from agent.world import build_sdf
-
-ROOT = Path(__file__).resolve().parent.parent
+from trustfg.agent.planner import PeerConstraint, PlanRequest, build_graph, interval_problem, plan_trajectory
+from trustfg.agent.scenario_files import load_scenario
+from trustfg.agent.world import build_sdf
 
 
 def peer_plans(scenario, sdf, config, t_arrive):
     """The peers' plans, each shifted in time so that it reaches the point where its path
     crosses the ego car's exactly when the ego car (planning alone) would be there."""
     ego = scenario.cars[0]
+    eps_obstacle = scenario.safety.epsilon_obstacle(ego.radius_m)
     alone = plan_trajectory(PlanRequest(0.0, np.array(ego.start), np.zeros(2), np.array(ego.goal),
-                                        t_arrive, lane=(ego.start,)), config, sdf).plan
+                                        t_arrive, eps_obstacle, lane=(ego.start,)), config, sdf).plan
     times = np.linspace(0.0, t_arrive, 1201)
     ego_path = alone.position_at(times)
     plans = []
     for car in scenario.cars[1:]:
         request = PlanRequest(0.0, np.array(car.start), np.zeros(2), np.array(car.goal), t_arrive,
-                              lane=(car.start,))
+                              scenario.safety.epsilon_obstacle(car.radius_m), lane=(car.start,))
         plan = plan_trajectory(request, config, sdf).plan
         path = plan.position_at(times)
         gaps = np.linalg.norm(ego_path[:, None, :] - path[None, :, :], axis=-1)
@@ -60,7 +57,7 @@ def peer_plans(scenario, sdf, config, t_arrive):
 def ego_request(scenario, peers, t_arrive, epsilon):
     car = scenario.cars[0]
     return PlanRequest(0.0, np.array(car.start), np.zeros(2), np.array(car.goal), t_arrive,
-                       peers=tuple(PeerConstraint(p, epsilon) for p in peers), lane=(car.start,))
+                       scenario.safety.epsilon_obstacle(car.radius_m), peers=tuple(PeerConstraint(p, epsilon) for p in peers), lane=(car.start,))
 
 
 def timed(fn, repeats):
@@ -105,12 +102,13 @@ def per_iteration(graph, values, repeats):
 
 
 def run(n_states: int, repeats: int) -> dict:
-    scenario = load_scenario(ROOT / "deploy" / "scenarios" / "intersection.toml")
+    scenario = load_scenario("intersection")
     config = dataclasses.replace(scenario.planner, support_states=n_states, interp_checks=4)
     sdf = build_sdf(scenario.world)
     t_arrive = 12.0
     peers = peer_plans(scenario, sdf, config, t_arrive)
-    request = ego_request(scenario, peers, t_arrive, config.epsilon_m)
+    ego, peer = scenario.cars[0], scenario.cars[1]
+    request = ego_request(scenario, peers, t_arrive, scenario.safety.epsilon_0(ego.radius_m, peer.radius_m))
     cold_ms, cold = timed(lambda: plan_trajectory(request, config, sdf), repeats)
 
     # Warm replans: every 0.2 s, from the previous plan's state.

@@ -1,6 +1,7 @@
-"""Hardware links of one car process.
+"""One car's links and control: from OptiTrack poses to the car's velocity commands.
 
-It owns the NatNet client that ingests OptiTrack (Motive) poses, the UDP car link that
-carries velocity commands to a car, and the trajectory-tracking controller that turns a
-plan into those commands.
+It owns the NatNet codec and client that ingest Motive's poses, the UDP car link that
+carries velocity commands (codec, the car's receiving rules, sockets), the trajectory
+tracking controller that turns a plan into a command, and the proximity guard that caps
+the speed under any plan.
 """

@@ -9,7 +9,8 @@ another car seen ahead of it. For every other car j whose centre lies within
     v t_r + v^2 / (2 a) <= d - d_stop     (reaction distance + braking distance)
     =>  v_max = a (-t_r + sqrt(t_r^2 + 2 (d - d_stop) / a)),   0 once d <= d_stop
 
-with a = ``decel_mps2``, t_r = ``reaction_s``, d_stop = ``stop_distance_m``. When we are
+with a = ``decel_mps2``, t_r = ``reaction_s`` and d_stop the pair's breach distance
+(SafetyConfig: both radii + the required clearance) + ``stop_margin_m``. When we are
 also ahead of j (head-on), both cars close the same gap, so each may use only half of
 it: d - d_stop becomes (d - d_stop) / 2. Cars beside or behind do not limit us (they see
 us ahead and brake themselves), and turning is never limited, so a car held by the guard
@@ -28,27 +29,28 @@ from collections.abc import Iterable
 
 import numpy as np
 
-from agent.config import GuardConfig
-from agent.world import SignedDistanceField
+from trustfg.agent.config import GuardConfig, SafetyConfig
+from trustfg.agent.world import SignedDistanceField
 
 RAY_STEP_M = 0.02
 RAY_LENGTH_M = 1.5
 """Beyond the stopping distance from any speed the car can reach (0.8 m/s: 0.4 m)."""
 
 
-def speed_cap(x: float, y: float, yaw: float, others: Iterable[tuple[float, float, float]],
-              config: GuardConfig, sdf: SignedDistanceField | None = None, radius_m: float = 0.1) -> float:
-    """The highest forward speed from which the car at (x, y, yaw) still stops short of
-    every car (x, y, yaw) in ``others`` ahead of it and, given the map's ``sdf``, of every
-    wall ahead (inf when nothing is ahead)."""
+def speed_cap(x: float, y: float, yaw: float, radius_m: float,
+              others: Iterable[tuple[float, float, float, float]], config: GuardConfig,
+              safety: SafetyConfig, sdf: SignedDistanceField | None = None) -> float:
+    """The highest forward speed from which the car of ``radius_m`` at (x, y, yaw) still
+    stops short of every car (x, y, yaw, radius) in ``others`` ahead of it and, given the
+    map's ``sdf``, of every wall ahead (inf when nothing is ahead)."""
     cap = math.inf if sdf is None else stopping_speed(wall_room(x, y, yaw, sdf, radius_m + config.wall_clearance_m), config)
     cos_cone = math.cos(math.radians(config.cone_deg))
-    for ox, oy, oyaw in others:
+    for ox, oy, oyaw, oradius in others:
         dx, dy = ox - x, oy - y
         d = math.hypot(dx, dy)
         if d > 0.0 and (dx * math.cos(yaw) + dy * math.sin(yaw)) / d < cos_cone:
             continue  # beside or behind
-        room = d - config.stop_distance_m
+        room = d - (safety.breach_distance(radius_m, oradius) + config.stop_margin_m)
         if d > 0.0 and -(dx * math.cos(oyaw) + dy * math.sin(oyaw)) / d >= cos_cone:
             room /= 2.0  # it faces us too: we share the gap
         cap = min(cap, stopping_speed(room, config))

@@ -153,7 +153,7 @@ from typing import Literal, Sequence, Union
 
 __all__ = [
     "NatNetError", "MessageId", "Version", "V2_5", "V2_7", "V2_9", "V3_0", "V3_1", "V4_0",
-    "V4_1", "FRAME_VERSIONS", "RigidBody", "MarkerSet", "LabeledMarker", "Skeleton", "Asset",
+    "V4_1", "FRAME_VERSIONS", "STREAM_VERSIONS", "DEFAULT_VERSION", "DEFAULT_STREAM_VERSION", "RigidBody", "MarkerSet", "LabeledMarker", "Skeleton", "Asset",
     "AnalogDevice", "Frame", "ConnectionInfo", "ServerInfo", "ConnectRequest",
     "DiscoveryRequest", "Request", "Response", "MessageString", "KeepAlive", "Disconnect",
     "RequestModelDef", "RequestFrame", "EchoRequest", "EchoResponse", "UnrecognizedRequest",
@@ -236,6 +236,11 @@ _ZERO_VERSION = Version(0, 0, 0, 0)
 V2_5, V2_7, V2_9 = Version(2, 5), Version(2, 7), Version(2, 9)
 V3_0, V3_1, V4_0, V4_1 = Version(3, 0), Version(3, 1), Version(4, 0), Version(4, 1)
 FRAME_VERSIONS = (V3_0, V3_1, V4_0, V4_1)  # decoded and encoded; 2.x is decoded only
+STREAM_VERSIONS = tuple(f"{v.major}.{v.minor}" for v in FRAME_VERSIONS)
+"""The versions a stream may be configured as, "3.0" ... (command-line choices)."""
+DEFAULT_VERSION = V3_1
+"""What mocap-sim streams unless told otherwise."""
+DEFAULT_STREAM_VERSION = f"{DEFAULT_VERSION.major}.{DEFAULT_VERSION.minor}"
 
 # ---------------------------------------------------------------------------------------
 # Precompiled structs

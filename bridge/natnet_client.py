@@ -49,9 +49,18 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Callable, Mapping
 
-from bridge import natnet
-from bridge.natnet import (ConnectRequest, Frame, MessageId, NatNetError, RigidBody, ServerInfo,
-                           Version, supports_frames)
+from trustfg.agent.config import NatNetConfig
+from trustfg.bridge import natnet
+from trustfg.bridge.natnet import (
+    ConnectRequest,
+    Frame,
+    MessageId,
+    NatNetError,
+    RigidBody,
+    ServerInfo,
+    Version,
+    supports_frames,
+)
 
 __all__ = ["NatNetClientOptions", "NatNetClient", "NatNetConnectionError", "FrameReceiver",
            "BodySample", "NatNetStats"]
@@ -65,6 +74,10 @@ class NatNetConnectionError(ConnectionError):
     """The client could not set up its link to the NatNet server (timeout, bad address, ...)."""
 
 
+_DEFAULTS = NatNetConfig()
+"""Motive's well-known ports and group, from the one place they are configured."""
+
+
 @dataclass(frozen=True)
 class NatNetClientOptions:
     """Where and how to listen. Ports and addresses as in Motive's streaming pane.
@@ -74,12 +87,12 @@ class NatNetClientOptions:
     version (NatNet 4 servers may honour it).
     """
 
-    server_address: str = "127.0.0.1"
-    command_port: int = 1510
-    multicast: bool = True
-    multicast_group: str = "239.255.42.99"
-    data_port: int = 1511
-    local_address: str = "0.0.0.0"
+    server_address: str = _DEFAULTS.server
+    command_port: int = _DEFAULTS.command_port
+    multicast: bool = _DEFAULTS.mode == "multicast"
+    multicast_group: str = _DEFAULTS.multicast_group
+    data_port: int = _DEFAULTS.data_port
+    local_address: str = _DEFAULTS.local_interface
     handshake: bool = True
     natnet_version: Version | None = None
     requested_version: Version | None = None

@@ -18,11 +18,11 @@ from pathlib import Path
 
 import numpy as np
 
-from agent import metrics
-from agent.fleet_sim import RunRecord
-from agent.world import build_sdf
-from dashboard import figures
-from dashboard.recording import read_recording, resolve_run
+from trustfg.agent import metrics
+from trustfg.agent.world import build_sdf
+from trustfg.fleet import figures
+from trustfg.fleet.recording import read_recording, resolve_run
+from trustfg.fleet.runs import RunRecord, arrivals, motion_summary, rounded
 
 TRUST_SAMPLE_S = 0.1
 
@@ -42,11 +42,7 @@ def record_from(path: Path) -> tuple:
     t0 = min(c["depart"] for c in start.data["cars"].values()) if start else times[0]
     depart = [start.data["cars"][str(i)]["depart"] - t0 if start and str(i) in start.data["cars"] else 0.0 for i in ids]
     rel = times - t0
-    goals = np.array([c.goal for c in scenario.cars])
-    arrived = []
-    for k in range(len(ids)):
-        near = np.nonzero(np.linalg.norm(states[:, k, :2] - goals[k], axis=1) <= scenario.sim.goal_tolerance_m)[0]
-        arrived.append(float(rel[near[0]]) if len(near) else None)
+    arrived = arrivals(scenario, rel, states)
     trust_times, trust, transparency, epsilon = _trust_series(events, ids, t0)
     replan = defaultdict(list)
     for e in events:
@@ -106,21 +102,7 @@ def _trust_series(events, ids, t0):
 
 
 def run_summary(scenario, record: RunRecord) -> dict:
-    positions = record.states[:, :, :2]
-    radii = np.array(record.radii)
-    distance = metrics.min_distance_matrix(positions)
-    clearance = metrics.clearance_matrix(distance, radii)
-    return {
-        "car_ids": record.car_ids,
-        "min_distance": distance.round(4).tolist(),
-        "breaches": metrics.breaches(clearance, record.car_ids),
-        "obstacle_min_clearance": round(metrics.obstacle_min_clearance(positions, radii, build_sdf(scenario.world)), 4),
-        "reached_goal": [a is not None for a in record.arrived_at],
-        "makespan_s": round(max(record.arrived_at), 3) if all(a is not None for a in record.arrived_at) else None,
-        "inconsistency": round(metrics.inconsistency_index(record.times, record.states, record.depart_at,
-                                                           record.arrived_at), 4),
-        "trust": record.trust[-1].round(4).tolist(),
-    }
+    return motion_summary(scenario, record, build_sdf(scenario.world)) | {"trust": rounded(record.trust[-1])}
 
 
 def write_report(run: Path, out: Path | None = None) -> Path:
@@ -138,7 +120,7 @@ def write_report(run: Path, out: Path | None = None) -> Path:
     figures.plot_trajectories(ax, scenario, record, f"{scenario.name}: executed paths (too close: black)")
     figures._save(fig, folder / "trajectories.png")
     fig, ax = plt.subplots(figsize=(5.5, 4.5))
-    threshold = 2 * max(record.radii) + metrics.BREACH_CLEARANCE_M
+    threshold = metrics.breach_distances(record.radii, scenario.safety.clearance_m)
     figures.plot_min_distance(ax, np.array(summary["min_distance"]), record.car_ids, "min distance (m)", threshold)
     figures._save(fig, folder / "min_distance.png")
     fig, ax = plt.subplots(figsize=(9, 3.5))

@@ -4,7 +4,7 @@
     trustfg dashboard --replay RUN  [--host H] [--port P]
 
 A Starlette (ASGI) app served by uvicorn. Live, it joins the fleet's Zenoh bus as an
-observer; replaying, it plays an MCAP recording (dashboard.recording) at real time, with
+observer; replaying, it plays an MCAP recording (trustfg.fleet.recording) at real time, with
 play, pause, speed and a time slider. Either way the messages feed one
 :class:`dashboard.state.FleetView`, and every connected page gets a snapshot over a
 WebSocket 10 times a second. The page (dashboard/static) is plain HTML, SVG and
@@ -36,11 +36,12 @@ from starlette.routing import Mount, Route, WebSocketRoute
 from starlette.staticfiles import StaticFiles
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
-from agent import messages
-from agent.bus import FleetBus
-from agent.config import ConfigError, Scenario, load_scenario
-from dashboard.recording import Recorded, read_recording, resolve_run
-from dashboard.state import FleetView
+from trustfg.agent import messages
+from trustfg.agent.config import ConfigError, Scenario
+from trustfg.agent.scenario_files import load_scenario
+from trustfg.dashboard.state import FleetView
+from trustfg.fleet.bus import FleetBus
+from trustfg.fleet.recording import Recorded, read_recording, resolve_run
 
 log = logging.getLogger(__name__)
 

@@ -5,7 +5,7 @@ or replayed from a recording -- and keeps, per car, its latest pose, plan, trust
 and status, message rates over the last ``RATE_WINDOW_S``, the running minimum distance
 between every pair of cars, and the alerts a person watching should see:
 
-    breach      two cars closer than the breach distance (clearance < 0.1 m) right now
+    breach      two cars closer than their breach distance (SafetyConfig) right now
     low_trust   a car's overall trust in a peer below LOW_TRUST
     stale_peer  nothing heard from a car for STALE_AFTER_S, or its process left the bus
     lost_pose   a car reports it does not see itself (pose invalid), or its pose is older
@@ -24,24 +24,23 @@ from dataclasses import dataclass, field
 import numpy as np
 from matplotlib.colors import to_hex
 
-from agent import messages
-from agent.config import Scenario
-from agent.metrics import BREACH_CLEARANCE_M
+from trustfg.agent import messages, metrics
+from trustfg.agent.config import Scenario
 
 RATE_WINDOW_S = 2.0
 STALE_AFTER_S = 1.5
 LOST_POSE_AFTER_S = 0.5
 LOW_TRUST = 0.6
 PLAN_SAMPLES = 40
-PALETTE = ["#1f77b4", "#2ca02c", "#d62728", "#ff7f0e", "#9467bd", "#8c564b", "#e377c2", "#bcbd22", "#17becf"]
 
 
-def css_color(name: str, index: int) -> str:
-    """A colour the browser understands (matplotlib names like 'tab:blue' become hex)."""
+def css_color(name: str) -> str:
+    """A colour the browser understands (matplotlib names like 'tab:blue' become hex;
+    a name matplotlib does not know becomes grey)."""
     try:
-        return to_hex(name) if name else PALETTE[index % len(PALETTE)]
+        return to_hex(name)
     except ValueError:
-        return PALETTE[index % len(PALETTE)]
+        return "#7f7f7f"
 
 
 @dataclass
@@ -63,8 +62,8 @@ class CarView:
 class FleetView:
     def __init__(self, scenario: Scenario):
         self.scenario = scenario
-        self.cars = {c.id: CarView(c.id, css_color(c.color, i), c.goal, c.radius_m)
-                     for i, c in enumerate(scenario.cars)}
+        self.cars = {c.id: CarView(c.id, css_color(color), c.goal, c.radius_m)
+                     for c, color in zip(scenario.cars, scenario.car_colors())}
         self.ids = [c.id for c in scenario.cars]
         n = len(self.ids)
         self.min_distance = np.full((n, n), np.inf)
@@ -72,7 +71,10 @@ class FleetView:
         self.distance_source = "poses"
         self.now = -math.inf
         self.alert_since: dict[tuple, float] = {}
-        self.breach_distance = 2 * max(c.radius_m for c in scenario.cars) + BREACH_CLEARANCE_M
+        self.breach_distance = metrics.breach_distances([c.radius_m for c in scenario.cars],
+                                                        scenario.safety.clearance_m)
+        """(n, n) centre distance below which each pair breaches, in ``ids`` order."""
+        self._index = {car_id: i for i, car_id in enumerate(self.ids)}
         self.messages = 0
 
     # --- inputs ----------------------------------------------------------------------------
@@ -133,7 +135,7 @@ class FleetView:
     def alerts(self) -> list[dict]:
         found = []
         for (a, b), d in self.distances_now().items():
-            if d < self.breach_distance:
+            if d < self.breach_distance[self._index[a], self._index[b]]:
                 found.append(("breach", (a, b), f"cars {a} and {b} are {d:.2f} m apart"))
         for a, car in self.cars.items():
             if car.trust is not None:
@@ -202,5 +204,5 @@ class FleetView:
                            "points": [list(p) for p in o.points]} for o in world.obstacles],
             "cars": [{"id": c.id, "color": self.cars[c.id].color, "goal": list(c.goal), "start": list(c.start),
                       "radius": c.radius_m} for c in self.scenario.cars],
-            "breach_distance": self.breach_distance, "low_trust": LOW_TRUST,
+            "breach_distance": self.breach_distance.round(4).tolist(), "low_trust": LOW_TRUST,
         }

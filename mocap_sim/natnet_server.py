@@ -51,9 +51,20 @@ from typing import Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
-from bridge import natnet
-from bridge.natnet import (ConnectionInfo, Frame, MarkerSetDescription, MessageId, ModelDef,
-                           NatNetError, RigidBody, RigidBodyDescription, ServerInfo, Version)
+from trustfg.agent.config import NatNetConfig
+from trustfg.bridge import natnet
+from trustfg.bridge.natnet import (
+    ConnectionInfo,
+    Frame,
+    MarkerSetDescription,
+    MessageId,
+    ModelDef,
+    NatNetError,
+    RigidBody,
+    RigidBodyDescription,
+    ServerInfo,
+    Version,
+)
 
 __all__ = ["Occlusion", "NatNetServerOptions", "NatNetServer", "NatNetServerStats",
            "ServedBody"]
@@ -81,6 +92,10 @@ class Occlusion:
         return body_id == self.body_id and self.start_s <= t < self.end_s
 
 
+_DEFAULTS = NatNetConfig()
+"""Motive's well-known ports and group, from the one place they are configured."""
+
+
 @dataclass(frozen=True)
 class NatNetServerOptions:
     """Server settings. ``address`` is the interface: command socket, multicast interface.
@@ -88,13 +103,13 @@ class NatNetServerOptions:
     Port 0 picks a free port (tests); the actual ports are on the running server.
     """
 
-    natnet_version: Version = natnet.V3_0
+    natnet_version: Version = natnet.DEFAULT_VERSION
     rate_hz: float = 120.0
-    address: str = "127.0.0.1"
-    command_port: int = 1510
-    multicast: bool = True
-    multicast_group: str = "239.255.42.99"
-    data_port: int = 1511
+    address: str = _DEFAULTS.server
+    command_port: int = _DEFAULTS.command_port
+    multicast: bool = _DEFAULTS.mode == "multicast"
+    multicast_group: str = _DEFAULTS.multicast_group
+    data_port: int = _DEFAULTS.data_port
     multicast_ttl: int = 1
     app_name: str = "mocap_sim"
     app_version: Version = Version(0, 1, 0, 0)

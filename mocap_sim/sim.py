@@ -1,6 +1,6 @@
 """``trustfg mocap-sim --config FILE``: the lab's hardware, simulated.
 
-For every car of the config: a simulated unicycle (mocap_sim.vehicle) that takes the
+For every car of the config: a simulated unicycle (agent.vehicle) that takes the
 same UDP command datagrams as a real car on its ``link`` address, through the very
 receiving logic real firmware runs (bridge.carlink.CommandFilter: checksum, car id,
 sequence order, 250 ms watchdog, e-stop). A NatNet server (mocap_sim.natnet_server)
@@ -9,7 +9,7 @@ streams every car's pose as Motive would, at the config's NatNet address and por
 Physics runs at ``--physics-hz`` on absolute deadlines. Ground truth (fleet clock,
 every car's x, y, yaw, v, omega, and the command it is applying, v_cmd and omega_cmd --
 zero once its watchdog, a STOP or an e-stop stops it) goes to ``--ground-truth FILE``
-as CSV at 50 Hz; every change of a car's command between zero and non-zero is also
+as CSV at the fleet's command rate (``control.command_rate_hz``); every change of a car's command between zero and non-zero is also
 written, at physics resolution, to ``--command-log FILE`` (t, car_id, v_cmd, omega_cmd).
 
 Fault knobs (all times in seconds since the simulator started):
@@ -36,7 +36,6 @@ import json
 import logging
 import math
 import socket
-import sys
 import threading
 import time
 from dataclasses import dataclass
@@ -44,17 +43,17 @@ from pathlib import Path
 
 import numpy as np
 
-from agent.cli import stop_on_signals
-from agent.config import ConfigError, Scenario, load_scenario, parse_udp_address
-from agent.ticker import ticks
-from bridge import natnet
-from bridge.carlink import CommandReceiver
-from mocap_sim.natnet_server import NatNetServer, NatNetServerOptions, Occlusion
-from mocap_sim.vehicle import VehicleState, step
+from trustfg.agent.config import ConfigError, Scenario, parse_udp_address
+from trustfg.agent.scenario_files import load_scenario
+from trustfg.agent.vehicle import VehicleState, step
+from trustfg.bridge import natnet
+from trustfg.bridge.carlink import CommandReceiver
+from trustfg.fleet.command import configured, stop_on_signals
+from trustfg.fleet.ticker import ticks
+from trustfg.mocap_sim.natnet_server import NatNetServer, NatNetServerOptions, Occlusion
 
 log = logging.getLogger(__name__)
 
-GROUND_TRUTH_PERIOD_S = 0.02
 BODY_HEIGHT_M = 0.05
 
 
@@ -83,7 +82,7 @@ def parse_window(text: str) -> Window:
 
 @dataclass(frozen=True)
 class MocapSimOptions:
-    natnet_version: str = "3.1"
+    natnet_version: str = natnet.DEFAULT_STREAM_VERSION
     rate_hz: float = 120.0
     physics_hz: float = 200.0
     drop_rate: float = 0.0
@@ -98,13 +97,6 @@ class MocapSimOptions:
     command_log: Path | None = None
 
 
-def start_heading(car) -> float:
-    if car.start_heading_rad is not None:
-        return car.start_heading_rad
-    target = car.route[0] if car.route else car.goal
-    return math.atan2(target[1] - car.start[1], target[0] - car.start[0])
-
-
 class MocapSim:
     def __init__(self, scenario: Scenario, options: MocapSimOptions, clock=time.time):
         missing = [car.id for car in scenario.cars if not car.link]
@@ -115,7 +107,7 @@ class MocapSim:
         self.clock = clock
         self.stop = threading.Event()
         self._lock = threading.Lock()
-        self.states = {car.id: VehicleState(car.start[0], car.start[1], start_heading(car)) for car in scenario.cars}
+        self.states = {car.id: VehicleState(car.start[0], car.start[1], car.start_heading) for car in scenario.cars}
         self.commands = {car.id: (0.0, 0.0) for car in scenario.cars}
         self._bodies = {car.id: car.body_id for car in scenario.cars}
         self._rng = np.random.default_rng([options.seed, 1])
@@ -200,6 +192,7 @@ class MocapSim:
     def _physics(self, receivers: dict[int, CommandReceiver], writer: "_CsvWriter",
                  command_log: "_CommandLog") -> None:
         period = 1.0 / self.options.physics_hz
+        truth_period = 1.0 / self.scenario.control.command_rate_hz
         next_truth = time.monotonic()
         limits = self.scenario.vehicle
         for _, now in ticks(period, self.stop, max_lag_periods=5):
@@ -219,7 +212,7 @@ class MocapSim:
                 states = dict(self.states)
                 commands = dict(self.commands)
             if now >= next_truth:
-                next_truth += GROUND_TRUTH_PERIOD_S
+                next_truth += truth_period
                 writer.write(self.clock(), states, commands)
 
 
@@ -269,8 +262,8 @@ def main(argv: list[str] | None = None) -> int:
         prog="trustfg mocap-sim", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog="Times of --occlude and --cut-link are seconds since the simulator started.")
     parser.add_argument("--config", required=True, type=Path, help="fleet config TOML (cars need link addresses)")
-    parser.add_argument("--natnet-version", choices=["3.0", "3.1", "4.0", "4.1"], default="3.1",
-                        help="NatNet version of SERVERINFO and the frames (default 3.1)")
+    parser.add_argument("--natnet-version", choices=natnet.STREAM_VERSIONS, default=natnet.DEFAULT_STREAM_VERSION,
+                        help="NatNet version of SERVERINFO and the frames (default %(default)s)")
     parser.add_argument("--rate", type=float, default=120.0, help="NatNet frame rate, Hz (default 120)")
     parser.add_argument("--physics-hz", type=float, default=200.0, help="physics rate, Hz (default 200)")
     parser.add_argument("--drop-rate", type=float, default=0.0, help="probability of dropping a frame (0..1)")
@@ -296,17 +289,12 @@ def main(argv: list[str] | None = None) -> int:
     for name in ("noise", "latency", "slip"):
         if not getattr(args, name) >= 0:
             parser.error(f"--{name} must be >= 0")
-    try:
-        scenario = load_scenario(args.config)
-        options = MocapSimOptions(
-            natnet_version=args.natnet_version, rate_hz=args.rate, physics_hz=args.physics_hz,
-            drop_rate=args.drop_rate, noise_m=args.noise, latency_s=args.latency,
-            occlusions=tuple(args.occlude), link_cuts=tuple(args.cut_link), slip=args.slip,
-            seed=args.seed, ground_truth=args.ground_truth, control_port=args.control_port,
-            command_log=args.command_log)
-        sim = MocapSim(scenario, options)
-    except ConfigError as exc:
-        print(f"trustfg mocap-sim: {exc}", file=sys.stderr)
-        return 2
+    options = MocapSimOptions(
+        natnet_version=args.natnet_version, rate_hz=args.rate, physics_hz=args.physics_hz,
+        drop_rate=args.drop_rate, noise_m=args.noise, latency_s=args.latency,
+        occlusions=tuple(args.occlude), link_cuts=tuple(args.cut_link), slip=args.slip,
+        seed=args.seed, ground_truth=args.ground_truth, control_port=args.control_port,
+        command_log=args.command_log)
+    sim = configured("trustfg mocap-sim", lambda: MocapSim(load_scenario(args.config), options))
     stop_on_signals(sim.stop)
     return sim.run()

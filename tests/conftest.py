@@ -11,8 +11,8 @@ from pathlib import Path
 
 import pytest
 
-from agent.config import load_scenario
-from agent.world import build_sdf
+from trustfg.agent.scenario_files import load_scenario
+from trustfg.agent.world import build_sdf
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENARIOS = ROOT / "deploy" / "scenarios"
@@ -67,7 +67,7 @@ def trustfg_processes() -> list[str]:
         except OSError:
             continue
         text = " ".join(a.decode(errors="replace") for a in argv if a)
-        if "agent.cli" in text or "/trustfg " in text + " ":
+        if "-m trustfg" in text or "/trustfg " in text + " ":
             found.append(f"{entry.name}: {text}")
     return found
 

@@ -5,7 +5,7 @@ import sys
 
 def test_experiment_command_writes_metrics_and_figures(tmp_path):
     done = subprocess.run(
-        [sys.executable, "-m", "agent.cli", "experiment", "lab", "--seeds", "1", "--jobs", "1",
+        [sys.executable, "-m", "trustfg", "experiment", "lab", "--seeds", "1", "--jobs", "1",
          "--out", str(tmp_path)], capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
     assert "min distance matrix A" in done.stdout and "min distance matrix B" in done.stdout
@@ -20,8 +20,8 @@ def test_experiment_command_writes_metrics_and_figures(tmp_path):
 
 
 def test_unknown_command_and_bad_arguments():
-    bad = subprocess.run([sys.executable, "-m", "agent.cli", "fly"], capture_output=True, text=True)
+    bad = subprocess.run([sys.executable, "-m", "trustfg", "fly"], capture_output=True, text=True)
     assert bad.returncode == 2 and "unknown command" in bad.stderr
-    bad = subprocess.run([sys.executable, "-m", "agent.cli", "experiment", "proximity", "--seeds", "0"],
+    bad = subprocess.run([sys.executable, "-m", "trustfg", "experiment", "proximity", "--seeds", "0"],
                          capture_output=True, text=True)
     assert bad.returncode == 2 and "--seeds" in bad.stderr

@@ -24,7 +24,7 @@ def test_readme_has_exactly_two_setup_commands_and_ci_runs_the_test_one():
 def test_shipped_deploy_configs_load():
     import zenoh
 
-    from agent.config import load_scenario
+    from trustfg.agent.scenario_files import load_scenario
 
     for name in ("fleet.toml", "fleet-secure.toml"):
         fleet = load_scenario(ROOT / "deploy" / "lab" / name)

@@ -25,7 +25,7 @@ def test_the_check_sees_a_leftover_process_and_port():
     import subprocess
     import sys
 
-    probe = subprocess.Popen([sys.executable, "-c", "import time, sys; time.sleep(60)", "agent.cli"])
+    probe = subprocess.Popen([sys.executable, "-c", "import time, sys; time.sleep(60)", "-m trustfg"])
     sock = socket.socket()
     sock.bind(("127.0.0.1", 0))
     sock.listen()

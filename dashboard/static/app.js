@@ -5,7 +5,7 @@
 
 const SVG = "http://www.w3.org/2000/svg";
 const svg = document.getElementById("map");
-let map = null;          // {bounds, obstacles, cars, breach_distance, low_trust}
+let map = null;          // {bounds, obstacles, cars, breach_distance (per pair, ids order), low_trust}
 let selected = null;     // the car whose epsilon circles are shown
 let drill = null;        // [truster, trustee] of the trust cell being inspected
 let latest = null;       // the last snapshot
@@ -184,7 +184,7 @@ function renderDistances(d) {
       const cell = tr.insertCell();
       cell.dataset.a = d.ids[i]; cell.dataset.b = d.ids[j];
       cell.textContent = i === j ? "·" : v === null ? "–" : v.toFixed(2);
-      cell.classList.toggle("breach", i !== j && v !== null && v < map.breach_distance);
+      cell.classList.toggle("breach", i !== j && v !== null && v < map.breach_distance[i][j]);
     });
   });
 }

@@ -4,10 +4,11 @@ import time
 
 import pytest
 
-from agent import messages
-from agent.bus import BusError, FleetBus, parse_key
-from agent.config import BusConfig
 from tests.conftest import free_tcp_port, wait_for
+from trustfg.agent import messages
+from trustfg.agent.config import BusConfig
+from trustfg.fleet.bus import BusError, FleetBus
+from trustfg.fleet.keys import parse_key
 
 FLEET = "t"
 

@@ -6,9 +6,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from agent.car_agent import CarAgent
-from agent.gp import Plan
-from agent.messages import PlanMessage
+from trustfg.agent.car_agent import CarAgent
+from trustfg.agent.gp import Plan
+from trustfg.agent.messages import PlanMessage
 
 PEER = 2
 SEEDS = range(8)

@@ -2,8 +2,9 @@ import dataclasses
 
 import pytest
 
-from agent.config import ConfigError, PlannerConfig, load_scenario, scenario_from_dict, with_overrides
 from tests.conftest import SCENARIOS
+from trustfg.agent.config import ConfigError, PlannerConfig, SafetyConfig, with_overrides
+from trustfg.agent.scenario_files import load_scenario, scenario_from_dict, shipped
 
 
 def minimal(**extra):
@@ -41,7 +42,7 @@ def test_defaults_fill_what_a_file_leaves_out():
     (minimal(world={"obstacles": [{"kind": "rect", "min": [1, 1], "max": [0, 0]}]}), "world.obstacles[0]"),
     (minimal(world={"obstacles": [{"kind": "circle"}]}), "world.obstacles[0].kind"),
     (minimal(world={"bounds_m": [0, 0, 1]}), "world.bounds_m: expected 4 values"),
-    (minimal(sim={"step_s": True}), "sim.step_s: expected a number"),
+    (minimal(sim={"timeout_s": True}), "sim.timeout_s: expected a number"),
     ({"name": "t", "cars": [{"id": 1, "start": [0, 0]}]}, "cars[0].goal: missing required key"),
     ({"name": "t", "cars": [{"id": 0, "start": [0, 0], "goal": [1, 1]}]}, "cars[0].id"),
     ({"name": "t", "cars": [{"id": 1, "start": [0, 0], "goal": [1, 1]},
@@ -58,7 +59,7 @@ def test_bad_config_names_the_key(data, message):
 
 def test_bad_file_errors(tmp_path):
     missing = tmp_path / "nope.toml"
-    with pytest.raises(ConfigError, match="no such scenario file"):
+    with pytest.raises(ConfigError, match="no such file, nor a shipped scenario"):
         load_scenario(missing)
     broken = tmp_path / "broken.toml"
     broken.write_text("name = \n")
@@ -68,6 +69,25 @@ def test_bad_file_errors(tmp_path):
     wrong.write_text('name = "x"\n[[cars]]\nid = 1\nstart = [0, 0]\ngoal = [1, 1]\n[planner]\nqc = "big"\n')
     with pytest.raises(ConfigError, match=r"wrong.toml: planner.qc: expected a number"):
         load_scenario(wrong)
+
+
+def test_shipped_scenes_load_by_name_and_a_file_wins_over_a_name(tmp_path, monkeypatch):
+    assert {"intersection", "intersection-8", "lab"} <= set(shipped())
+    assert load_scenario("intersection") == load_scenario("scenarios/intersection.toml")
+    assert load_scenario("lab/fleet").fleet == "lab"
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "intersection").write_text('name = "mine"\n[[cars]]\nid = 1\nstart = [0, 0]\ngoal = [1, 1]\n')
+    assert load_scenario("intersection").name == "mine"
+    with pytest.raises(ConfigError, match="shipped: intersection, intersection-8, lab"):
+        load_scenario("no-such-scene")
+
+
+def test_safety_distances_follow_the_radii():
+    safety = SafetyConfig()
+    assert safety.breach_distance(0.1, 0.1) == pytest.approx(0.3)
+    assert safety.epsilon_0(0.1, 0.1) == pytest.approx(0.45)
+    assert safety.epsilon_obstacle(0.1) == pytest.approx(0.25)
+    assert safety.epsilon_0(0.3, 0.1) - safety.epsilon_0(0.1, 0.1) == pytest.approx(0.2)
 
 
 def test_overrides_are_validated(intersection):
@@ -83,7 +103,7 @@ def test_config_is_immutable(intersection):
 
 
 def test_dump_and_load_round_trip(tmp_path, lab):
-    from agent.config import dump_scenario
+    from trustfg.agent.scenario_files import dump_scenario
     path = tmp_path / "again.toml"
     path.write_text(dump_scenario(lab))
     assert load_scenario(path) == lab

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 from gtsam.symbol_shorthand import V, X
 
-from agent import factors
-from agent.gp import interpolation_weights
-from agent.planner import _batched_interval_error, _check_error, _consistency_error, BatchedIntervals
+from trustfg.agent import factors
+from trustfg.agent.gp import interpolation_weights
+from trustfg.agent.planner import BatchedIntervals, _batched_interval_error, _check_error, _consistency_error
 
 H = 1e-7
 

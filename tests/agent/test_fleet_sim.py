@@ -10,8 +10,8 @@ import os
 import numpy as np
 import pytest
 
-from agent.experiments import run_experiment, summarise
-from agent.fleet_sim import simulate
+from trustfg.fleet.experiments import run_experiment, summarise
+from trustfg.fleet.fleet_sim import simulate
 
 SEEDS = list(range(100, 108))
 JOBS = min(2, os.cpu_count() or 1)

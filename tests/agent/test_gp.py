@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 from gtsam.symbol_shorthand import V, X
 
-from agent.gp import Plan, interpolation_matrices, interpolation_weights
+from trustfg.agent.gp import Plan, interpolation_matrices, interpolation_weights
 
 
 def random_plan(rng, n=6, t0=1.0, dt=0.7):

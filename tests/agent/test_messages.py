@@ -6,10 +6,19 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from agent import messages
-from agent.gp import Plan
-from agent.messages import (Inbox, MessageError, PeerTrust, PlanMessage, PoseMessage, StatusMessage,
-                            TrustReport, decode, encode)
+from trustfg.agent import messages
+from trustfg.agent.gp import Plan
+from trustfg.agent.messages import (
+    Inbox,
+    MessageError,
+    PeerTrust,
+    PlanMessage,
+    PoseMessage,
+    StatusMessage,
+    TrustReport,
+    decode,
+    encode,
+)
 
 
 def plan_message(sender=2, seq=1, n=21):

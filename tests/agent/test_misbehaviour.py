@@ -1,7 +1,7 @@
 import numpy as np
 
-from agent.gp import Plan
-from agent.misbehaviour import FALSE_OFFSET_MAX_M, FALSE_OFFSET_MIN_M, maybe_falsify
+from trustfg.agent.gp import Plan
+from trustfg.agent.misbehaviour import FALSE_OFFSET_MAX_M, FALSE_OFFSET_MIN_M, maybe_falsify
 
 
 def test_falsification_rate_and_size_are_as_documented():

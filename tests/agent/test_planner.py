@@ -3,17 +3,19 @@ import dataclasses
 import numpy as np
 import pytest
 
-from agent.config import PlannerConfig
-from agent.gp import Plan
-from agent.planner import PeerConstraint, PlanningError, PlanRequest, plan_trajectory
+from trustfg.agent.config import PlannerConfig, SafetyConfig
+from trustfg.agent.gp import Plan
+from trustfg.agent.planner import PeerConstraint, PlanningError, PlanRequest, plan_trajectory
 
+EPS_OBSTACLE = SafetyConfig().epsilon_obstacle(0.1)
+EPS_0 = SafetyConfig().epsilon_0(0.1, 0.1)
 LANES = [((0.4, -2.15), (0.4, 2.15)), ((-2.15, -0.4), (2.15, -0.4)), ((-0.4, 2.15), (-0.4, -2.15)),
          ((2.15, 0.4), (-2.15, 0.4))]
 
 
 def request(start, goal, t_arrive=12.0, **kw):
     return PlanRequest(t_now=0.0, position=np.array(start), velocity=np.zeros(2), goal=np.array(goal),
-                       t_arrive=t_arrive, lane=(start,), **kw)
+                       t_arrive=t_arrive, epsilon_obstacle=EPS_OBSTACLE, lane=(start,), **kw)
 
 
 def min_sdf(plan, sdf):
@@ -30,13 +32,13 @@ def test_plans_reach_the_goal_clear_of_obstacles(intersection_sdf, seed):
     a, b = rng.choice(4, 2, replace=False)
     start = arms[a] + rng.uniform(-0.5, 0.5, 2) * (arms[a] == 0)
     goal = arms[b] + rng.uniform(-0.5, 0.5, 2) * (arms[b] == 0)
-    result = plan_trajectory(PlanRequest(0.0, start, np.zeros(2), goal, 12.0, route=((0.0, 0.0),),
+    result = plan_trajectory(PlanRequest(0.0, start, np.zeros(2), goal, 12.0, EPS_OBSTACLE, route=((0.0, 0.0),),
                                          lane=(tuple(start), (0.0, 0.0))), config, intersection_sdf)
     plan = result.plan
     assert np.linalg.norm(plan.positions[-1] - goal) < 0.03
     assert np.linalg.norm(plan.velocities[-1]) < 0.05
     # The hinge is soft: a few millimetres inside epsilon, never near the wall.
-    assert min_sdf(plan, intersection_sdf) > config.epsilon_obstacle_m - 0.02
+    assert min_sdf(plan, intersection_sdf) > EPS_OBSTACLE - 0.02
 
 
 def crossing_peer(t_cross=6.0):
@@ -51,7 +53,7 @@ def crossing_peer(t_cross=6.0):
 
 
 @pytest.mark.parametrize("t_cross", [5.0, 5.6, 6.0, 6.4, 7.0])
-@pytest.mark.parametrize("epsilon", [0.45, 0.9])
+@pytest.mark.parametrize("epsilon", [EPS_0, 2 * EPS_0])
 def test_plan_keeps_epsilon_from_a_crossing_peer(intersection_sdf, t_cross, epsilon):
     peer = crossing_peer(t_cross)
     start, goal = LANES[0]
@@ -66,19 +68,19 @@ def test_without_proximity_the_plan_ignores_peers(intersection_sdf):
     peer = crossing_peer(6.0)
     start, goal = LANES[0]
     config = PlannerConfig(proximity=False, consistency=False)
-    result = plan_trajectory(request(start, goal, peers=(PeerConstraint(peer, 0.45),)), config, intersection_sdf)
+    result = plan_trajectory(request(start, goal, peers=(PeerConstraint(peer, EPS_0),)), config, intersection_sdf)
     times = np.linspace(0, 14, 1400)
     gap = np.linalg.norm(result.plan.position_at(times) - peer.position_at(times), axis=1).min()
-    assert gap < 0.45 - 0.1  # nowhere near the epsilon it would keep with the factor
+    assert gap < EPS_0 - 0.1  # nowhere near the epsilon it would keep with the factor
 
 
 def test_warm_start_replans_in_few_iterations(intersection_sdf):
     peer = crossing_peer(6.0)
     start, goal = LANES[0]
     config = PlannerConfig()
-    cold = plan_trajectory(request(start, goal, peers=(PeerConstraint(peer, 0.45),)), config, intersection_sdf)
+    cold = plan_trajectory(request(start, goal, peers=(PeerConstraint(peer, EPS_0),)), config, intersection_sdf)
     (p,), (v,) = cold.plan.state_at(0.2)
-    warm_request = dataclasses.replace(request(start, goal, peers=(PeerConstraint(peer, 0.45),)),
+    warm_request = dataclasses.replace(request(start, goal, peers=(PeerConstraint(peer, EPS_0),)),
                                        t_now=0.2, position=p, velocity=v, warm_start=cold.plan)
     warm = plan_trajectory(warm_request, config, intersection_sdf)
     assert warm.warm and warm.iterations <= max(3, cold.iterations // 2)
@@ -90,7 +92,7 @@ def test_warm_start_replans_in_few_iterations(intersection_sdf):
 def test_batched_and_gtsam_interpolation_agree(intersection_sdf):
     peer = crossing_peer(6.0)
     start, goal = LANES[0]
-    req = request(start, goal, peers=(PeerConstraint(peer, 0.45),))
+    req = request(start, goal, peers=(PeerConstraint(peer, EPS_0),))
     batched = plan_trajectory(req, PlannerConfig(support_states=11), intersection_sdf)
     native = plan_trajectory(req, PlannerConfig(support_states=11, interpolation="gtsam"), intersection_sdf)
     assert batched.initial_error == pytest.approx(native.initial_error, rel=1e-9)

@@ -1,10 +1,10 @@
 import numpy as np
 import pytest
 
-from agent.config import TrustConfig
-from agent.messages import PeerTrust, TrustReport
-from agent.misbehaviour import falsify_testimony
-from agent.trust import TRANSPARENCY, TrustBook, epsilon_gain, expected, graded
+from trustfg.agent.config import TrustConfig
+from trustfg.agent.messages import PeerTrust, TrustReport
+from trustfg.agent.misbehaviour import falsify_testimony
+from trustfg.agent.trust import TRANSPARENCY, TrustBook, epsilon_gain, expected, graded
 
 
 def test_expected_value_of_beta():

@@ -1,8 +1,8 @@
 import numpy as np
 import pytest
 
-from agent.config import Obstacle, WorldConfig
-from agent.world import build_sdf, exact_distance
+from trustfg.agent.config import Obstacle, WorldConfig
+from trustfg.agent.world import build_sdf, exact_distance
 
 
 @pytest.fixture(scope="module")

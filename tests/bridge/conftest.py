@@ -7,7 +7,6 @@ a skip.
 
 from __future__ import annotations
 
-import socket
 import struct
 from pathlib import Path
 from typing import Callable, NamedTuple

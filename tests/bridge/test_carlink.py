@@ -9,9 +9,20 @@ import zlib
 
 import pytest
 
-from bridge import carlink
-from bridge.carlink import (DATAGRAM_SIZE, CarLinkError, Command, CommandFilter, CommandReceiver,
-                            CommandSender, Flags, decode_command, encode_command, next_slot, seq_after)
+from trustfg.bridge import carlink
+from trustfg.bridge.carlink import (
+    DATAGRAM_SIZE,
+    CarLinkError,
+    Command,
+    CommandFilter,
+    CommandReceiver,
+    CommandSender,
+    Flags,
+    decode_command,
+    encode_command,
+    next_slot,
+    seq_after,
+)
 
 CAR = 3
 GOLDEN = Command(CAR, 0x01020304, 12.5, 0.25, -0.5)

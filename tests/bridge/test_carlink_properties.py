@@ -7,8 +7,17 @@ import zlib
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bridge.carlink import (DATAGRAM_SIZE, SEQ_MODULUS, CarLinkError, Command, CommandFilter, Flags,
-                            decode_command, encode_command, seq_after)
+from trustfg.bridge.carlink import (
+    DATAGRAM_SIZE,
+    SEQ_MODULUS,
+    CarLinkError,
+    Command,
+    CommandFilter,
+    Flags,
+    decode_command,
+    encode_command,
+    seq_after,
+)
 
 PROPERTY = settings(max_examples=300, deadline=None)
 seqs = st.integers(0, SEQ_MODULUS - 1)

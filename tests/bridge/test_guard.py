@@ -6,18 +6,27 @@ import math
 import numpy as np
 import pytest
 
-from agent.config import GuardConfig, VehicleConfig
-from bridge.guard import speed_cap, wall_room
-from mocap_sim.vehicle import VehicleState, step
+from trustfg.agent.config import GuardConfig, SafetyConfig, VehicleConfig
+from trustfg.agent.vehicle import VehicleState, step
+from trustfg.bridge.guard import speed_cap, wall_room
 
 GUARD = GuardConfig()
+SAFETY = SafetyConfig()
+RADIUS = 0.1
+STOP = SAFETY.breach_distance(RADIUS, RADIUS) + GUARD.stop_margin_m
+"""Centre distance at which two cars of RADIUS must have stopped (0.35 m)."""
+
+
+def cap(x, y, yaw, others, sdf=None):
+    """The guard's cap for a car of RADIUS among others (x, y, yaw) of RADIUS."""
+    return speed_cap(x, y, yaw, RADIUS, [(*other, RADIUS) for other in others], GUARD, SAFETY, sdf)
 
 
 def test_nobody_ahead_means_no_cap():
-    assert speed_cap(0, 0, 0, [], GUARD) == math.inf
-    assert speed_cap(0, 0, 0, [(-0.35, 0.0, 0.0)], GUARD) == math.inf  # behind
-    assert speed_cap(0, 0, 0, [(0.0, 0.35, 0.0)], GUARD) == math.inf  # beside
-    assert speed_cap(0, 0, math.pi / 2, [(0.0, 0.35, 0.0)], GUARD) < math.inf  # ahead once we face it
+    assert cap(0, 0, 0, []) == math.inf
+    assert cap(0, 0, 0, [(-0.35, 0.0, 0.0)]) == math.inf  # behind
+    assert cap(0, 0, 0, [(0.0, 0.35, 0.0)]) == math.inf  # beside
+    assert cap(0, 0, math.pi / 2, [(0.0, 0.35, 0.0)]) < math.inf  # ahead once we face it
 
 
 @pytest.mark.parametrize("its_yaw, share", [(math.pi / 2, 1.0), (math.pi, 0.5)])
@@ -25,17 +34,17 @@ def test_cap_is_zero_inside_the_stop_distance_and_grows_with_room(its_yaw, share
     """Reaction plus braking distance from the cap fills the room to the stop distance;
     half of it when the other car faces us (head-on: both close the gap)."""
     distances = np.linspace(0.0, 3.0, 301)
-    caps = np.array([speed_cap(0, 0, 0, [(d, 0.0, its_yaw)], GUARD) for d in distances])
-    assert np.all(caps[distances <= GUARD.stop_distance_m] == 0.0)
+    caps = np.array([cap(0, 0, 0, [(d, 0.0, its_yaw)]) for d in distances])
+    assert np.all(caps[distances <= STOP] == 0.0)
     assert np.all(np.diff(caps) >= 0.0) and caps[-1] > 1.0
-    room = share * (distances - GUARD.stop_distance_m)
+    room = share * (distances - STOP)
     reaction_plus_braking = caps * GUARD.reaction_s + caps**2 / (2 * GUARD.decel_mps2)
     np.testing.assert_allclose(reaction_plus_braking[room > 0], room[room > 0], atol=1e-12)
 
 
 def test_the_nearest_car_ahead_sets_the_cap():
-    near, far = speed_cap(0, 0, 0, [(0.6, 0.1, 0.0)], GUARD), speed_cap(0, 0, 0, [(1.2, 0.0, 0.0)], GUARD)
-    assert speed_cap(0, 0, 0, [(1.2, 0.0, 0.0), (0.6, 0.1, 0.0)], GUARD) == near < far
+    near, far = cap(0, 0, 0, [(0.6, 0.1, 0.0)]), cap(0, 0, 0, [(1.2, 0.0, 0.0)])
+    assert cap(0, 0, 0, [(1.2, 0.0, 0.0), (0.6, 0.1, 0.0)]) == near < far
 
 
 def closest_approach(a: VehicleState, b: VehicleState, limits: VehicleConfig, guard: bool,
@@ -50,8 +59,8 @@ def closest_approach(a: VehicleState, b: VehicleState, limits: VehicleConfig, gu
         if i % command_every == 0:
             seen_a, seen_b = history[max(0, len(history) - 1 - int(pose_delay_s / physics_dt))]
             v = limits.max_speed_mps
-            commands = (min(v, speed_cap(seen_a.x, seen_a.y, seen_a.yaw, [(seen_b.x, seen_b.y, seen_b.yaw)], GUARD)) if guard else v,
-                        min(v, speed_cap(seen_b.x, seen_b.y, seen_b.yaw, [(seen_a.x, seen_a.y, seen_a.yaw)], GUARD)) if guard else v)
+            commands = (min(v, cap(seen_a.x, seen_a.y, seen_a.yaw, [(seen_b.x, seen_b.y, seen_b.yaw)])) if guard else v,
+                        min(v, cap(seen_b.x, seen_b.y, seen_b.yaw, [(seen_a.x, seen_a.y, seen_a.yaw)])) if guard else v)
         a, b = step(a, commands[0], 0.0, physics_dt, limits), step(b, commands[1], 0.0, physics_dt, limits)
         history.append((a, b))
         least = min(least, math.hypot(a.x - b.x, a.y - b.y))
@@ -75,10 +84,9 @@ def test_two_blind_cars_under_the_guard_keep_the_stop_distance(seed):
     limits = VehicleConfig()
     a, b = encounter(seed)
     assert closest_approach(a, b, limits, guard=False) < 0.2  # without it they collide (0.2 m: radii)
-    assert closest_approach(a, b, limits, guard=True) >= GUARD.stop_distance_m - 0.01
+    assert closest_approach(a, b, limits, guard=True) >= STOP - 0.01
 
 
-RADIUS = 0.1
 KEEP = RADIUS + GUARD.wall_clearance_m  # centre to wall at the stop
 
 
@@ -91,9 +99,9 @@ def test_wall_room_is_the_distance_to_the_stop_line(intersection_sdf):
 
 def test_a_car_near_a_wall_may_drive_along_or_away_from_it_but_not_into_it(intersection_sdf):
     x = 0.8 - 0.12  # edge 0.02 m from the face, nearer than the guard's clearance
-    assert speed_cap(x, -1.5, math.pi / 2, [], GUARD, intersection_sdf, RADIUS) == math.inf  # along, north
-    assert speed_cap(x, -1.5, math.pi, [], GUARD, intersection_sdf, RADIUS) > 0.5  # away
-    assert speed_cap(x, -1.5, 0.0, [], GUARD, intersection_sdf, RADIUS) == 0.0  # into it
+    assert cap(x, -1.5, math.pi / 2, [], intersection_sdf) == math.inf  # along, north
+    assert cap(x, -1.5, math.pi, [], intersection_sdf) > 0.5  # away
+    assert cap(x, -1.5, 0.0, [], intersection_sdf) == 0.0  # into it
 
 
 @pytest.mark.parametrize("seed", range(20))
@@ -111,7 +119,7 @@ def test_a_blind_car_under_the_guard_stops_short_of_the_wall(intersection_sdf, s
                 seen = history[max(0, len(history) - 9)]
                 v = limits.max_speed_mps
                 if guard:
-                    v = min(v, speed_cap(seen.x, seen.y, seen.yaw, [], GUARD, intersection_sdf, RADIUS))
+                    v = min(v, cap(seen.x, seen.y, seen.yaw, [], intersection_sdf))
             car = step(car, v, 0.0, 0.005, limits)
             history.append(car)
             least = min(least, float(intersection_sdf.distance(np.array([car.x, car.y]))) - RADIUS)

@@ -10,9 +10,8 @@ from decimal import ROUND_HALF_UP, Decimal
 
 import pytest
 
-from bridge import natnet as nn
-from bridge.natnet import (Frame, MessageId, NatNetError, RigidBody, Version, V3_0, V3_1, V4_0,
-                           V4_1)
+from trustfg.bridge import natnet as nn
+from trustfg.bridge.natnet import V3_0, V3_1, V4_0, V4_1, Frame, MessageId, NatNetError, RigidBody, Version
 
 V3_FRAME = "mocapframe_packet_v3.bin"
 CLOCK_HZ = 3312787  # from the SERVERINFO of the same session

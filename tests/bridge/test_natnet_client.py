@@ -9,10 +9,9 @@ import time
 
 import pytest
 
-from bridge import natnet as nn
-from bridge.natnet import Frame, MessageId, RigidBody, Version, V3_0, V4_1
-from bridge.natnet_client import (FrameReceiver, NatNetClient, NatNetClientOptions,
-                                  NatNetConnectionError)
+from trustfg.bridge import natnet as nn
+from trustfg.bridge.natnet import V3_0, V4_1, Frame, MessageId, RigidBody, Version
+from trustfg.bridge.natnet_client import FrameReceiver, NatNetClient, NatNetClientOptions, NatNetConnectionError
 
 POSE = ((0.5, 0.25, -1.0), (0.0, 0.0, 0.0, 1.0))
 

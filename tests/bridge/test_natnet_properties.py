@@ -11,8 +11,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from bridge import natnet as nn
-from bridge.natnet import Frame, NatNetError, RigidBody, V4_1
+from trustfg.bridge import natnet as nn
+from trustfg.bridge.natnet import V4_1, Frame, NatNetError, RigidBody
 
 DECODABLE = nn.FRAME_VERSIONS + (nn.V2_5, nn.V2_7, nn.V2_9)
 SETTINGS = settings(max_examples=150, deadline=timedelta(seconds=2),

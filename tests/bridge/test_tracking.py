@@ -1,12 +1,11 @@
-import math
 
 import numpy as np
 import pytest
 
-from agent.config import TrackingConfig, VehicleConfig
-from agent.gp import Plan
-from bridge.tracking import track
-from mocap_sim.vehicle import VehicleState, step
+from trustfg.agent.config import TrackingConfig, VehicleConfig
+from trustfg.agent.gp import Plan
+from trustfg.agent.vehicle import VehicleState, step
+from trustfg.bridge.tracking import track
 
 
 def circle_plan(radius=1.0, speed=0.4, seconds=12.0, n=61):

@@ -10,17 +10,16 @@ import threading
 import time
 import urllib.request
 from collections import defaultdict, deque
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-from agent import messages
-from agent.bus import FleetBus
-from agent.launch import free_port, loopback_fleet, run
-from dashboard.recording import read_recording
-from dashboard.server import replay_to_end
 from tests.conftest import ROOT, wait_for
+from trustfg.agent import messages
+from trustfg.dashboard.server import replay_to_end
+from trustfg.fleet.bus import FleetBus
+from trustfg.fleet.launch import free_port, loopback_fleet, run
+from trustfg.fleet.recording import read_recording
 
 ARTIFACTS = ROOT / "test-artifacts"
 CHROMIUM_FLAGS = ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
@@ -168,7 +167,7 @@ def test_replay_page_has_a_time_slider_that_moves_the_fleet(live_run, tmp_path):
     fleet, out, port, published, thread, result = live_run
     thread.join(timeout=180)
     replay_port = free_port()
-    server = subprocess.Popen([sys.executable, "-m", "agent.cli", "dashboard", "--replay", str(out),
+    server = subprocess.Popen([sys.executable, "-m", "trustfg", "dashboard", "--replay", str(out),
                                "--port", str(replay_port)], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     try:
         assert wait_for(lambda: page_up(replay_port), 30.0)
@@ -202,7 +201,7 @@ def test_report_renders_figures_and_a_page_from_the_recording(live_run, tmp_path
 
     fleet, out, port, published, thread, result = live_run
     thread.join(timeout=180)
-    done = subprocess.run([sys.executable, "-m", "agent.cli", "report", str(out), "--out", str(tmp_path)],
+    done = subprocess.run([sys.executable, "-m", "trustfg", "report", str(out), "--out", str(tmp_path)],
                           capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     page = (tmp_path / "report.html").read_text()

@@ -7,11 +7,12 @@ import sys
 import threading
 import time
 
-from agent import messages
-from agent.bus import FleetBus
-from agent.config import BusConfig, dump_scenario
-from agent.launch import free_port
-from dashboard.recording import read_recording
+from trustfg.agent import messages
+from trustfg.agent.config import BusConfig
+from trustfg.agent.scenario_files import dump_scenario
+from trustfg.fleet.bus import FleetBus
+from trustfg.fleet.launch import free_port
+from trustfg.fleet.recording import read_recording
 
 
 def pose(seq: int) -> bytes:
@@ -25,7 +26,7 @@ def test_record_writes_what_the_fleet_says(intersection, tmp_path):
     config.write_text(dump_scenario(fleet))
     out = tmp_path / "lab.mcap"
     with FleetBus(BusConfig(listen=(car_endpoint,)), fleet.fleet, 2) as car:
-        recorder = subprocess.Popen([sys.executable, "-m", "agent.cli", "record", "--config", str(config),
+        recorder = subprocess.Popen([sys.executable, "-m", "trustfg", "record", "--config", str(config),
                                      "--out", str(out), "--listen", f"tcp/127.0.0.1:{free_port()}"],
                                     stdout=subprocess.PIPE, text=True)
         try:

@@ -1,10 +1,13 @@
 """FleetView, the dashboard's pure logic: alerts, rates, distances, snapshot shape."""
 
+import dataclasses
+
 import numpy as np
 
-from agent import messages
-from agent.gp import Plan
-from dashboard.state import LOW_TRUST, FleetView, css_color
+from trustfg.agent import messages
+from trustfg.agent.config import PALETTE
+from trustfg.agent.gp import Plan
+from trustfg.dashboard.state import LOW_TRUST, FleetView, css_color
 
 
 def pose(car, t, x, y, valid=True):
@@ -59,5 +62,11 @@ def test_truth_takes_over_the_distances(intersection):
 
 
 def test_css_colours():
-    assert css_color("tab:blue", 0) == "#1f77b4"
-    assert css_color("", 1).startswith("#") and css_color("no-such-colour", 2).startswith("#")
+    assert css_color("tab:blue") == "#1f77b4"
+    assert css_color("no-such-colour") == "#7f7f7f"
+
+
+def test_cars_without_a_colour_take_the_palette_in_order(intersection):
+    plain = dataclasses.replace(intersection, cars=tuple(dataclasses.replace(c, color="") for c in intersection.cars))
+    view = FleetView(plain)
+    assert [view.cars[c.id].color for c in plain.cars] == [css_color(name) for name in PALETTE[:len(plain.cars)]]

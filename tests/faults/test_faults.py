@@ -6,8 +6,8 @@ those of the faults issue; mocap_sim/faults.py documents how each number is meas
 
 import pytest
 
-from mocap_sim import netem
-from mocap_sim.faults import CASES, run_case
+from trustfg.fleet import netem
+from trustfg.fleet.faults import CASES, run_case
 
 pytestmark = [pytest.mark.faults,
               pytest.mark.skipif(netem.available() is not None, reason=str(netem.available()))]

@@ -9,14 +9,14 @@ import time
 
 import pytest
 
-from agent import messages
-from agent.bus import FleetBus
-from agent.config import dump_scenario
-from agent.launch import free_port, loopback_fleet
-from bridge import natnet
-from bridge.carlink import CommandReceiver
-from mocap_sim.natnet_server import NatNetServer, NatNetServerOptions
 from tests.conftest import wait_for
+from trustfg.agent import messages
+from trustfg.agent.scenario_files import dump_scenario
+from trustfg.bridge import natnet
+from trustfg.bridge.carlink import CommandReceiver
+from trustfg.fleet.bus import FleetBus
+from trustfg.fleet.launch import free_port, loopback_fleet
+from trustfg.mocap_sim.natnet_server import NatNetServer, NatNetServerOptions
 
 
 @pytest.fixture
@@ -46,7 +46,7 @@ def test_car_process_stops_without_pose_drives_after_start_and_stops_on_sigterm(
     with NatNetServer(options, served(car, lambda: tracked["on"])), \
             CommandReceiver(car.id, (host, int(port))) as link, \
             FleetBus(fleet.bus, fleet.fleet, None, listen=(observer,)) as bus:
-        process = subprocess.Popen([sys.executable, "-m", "agent.cli", "car", "--id", str(car.id), "--config",
+        process = subprocess.Popen([sys.executable, "-m", "trustfg", "car", "--id", str(car.id), "--config",
                                     str(path), "--stats", str(stats)], stderr=subprocess.PIPE, text=True)
         try:
             # Before the start: commands flow, and they are STOP.

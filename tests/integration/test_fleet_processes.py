@@ -4,7 +4,7 @@ import json
 
 import pytest
 
-from agent.launch import loopback_fleet, run
+from trustfg.fleet.launch import loopback_fleet, run
 
 
 @pytest.fixture(scope="module")

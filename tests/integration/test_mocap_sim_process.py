@@ -2,19 +2,18 @@
 
 import csv
 import dataclasses
-import socket
 import subprocess
 import sys
 import time
 
 import pytest
 
-from agent.config import dump_scenario
-from agent.launch import loopback_fleet
-from bridge import natnet
-from bridge.carlink import CommandSender
-from bridge.natnet_client import NatNetClient, NatNetClientOptions
 from tests.conftest import wait_for
+from trustfg.agent.scenario_files import dump_scenario
+from trustfg.bridge import natnet
+from trustfg.bridge.carlink import CommandSender
+from trustfg.bridge.natnet_client import NatNetClient, NatNetClientOptions
+from trustfg.fleet.launch import loopback_fleet
 
 
 @pytest.fixture
@@ -26,7 +25,7 @@ def two_cars(intersection, tmp_path):
 
 
 def start_mocap(path, truth, *extra):
-    process = subprocess.Popen([sys.executable, "-m", "agent.cli", "mocap-sim", "--config", str(path),
+    process = subprocess.Popen([sys.executable, "-m", "trustfg", "mocap-sim", "--config", str(path),
                                 "--ground-truth", str(truth), *extra],
                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     line = process.stdout.readline()

@@ -12,10 +12,10 @@ import time
 import numpy as np
 import pytest
 
-from bridge import natnet as nn
-from bridge.natnet import MessageId, Version, V3_0, V4_1
-from bridge.natnet_client import NatNetClient, NatNetClientOptions
-from mocap_sim.natnet_server import NatNetServer, NatNetServerOptions, Occlusion
+from trustfg.bridge import natnet as nn
+from trustfg.bridge.natnet import V3_0, V4_1, MessageId, Version
+from trustfg.bridge.natnet_client import NatNetClient, NatNetClientOptions
+from trustfg.mocap_sim.natnet_server import NatNetServer, NatNetServerOptions, Occlusion
 
 CLIENT = ("127.0.0.1", 40000)
 

@@ -6,7 +6,7 @@ import time
 
 import pytest
 
-from mocap_sim.netem import DelayRelay, Lab, available
+from trustfg.fleet.netem import DelayRelay, Lab, available
 
 
 @pytest.fixture

@@ -3,8 +3,8 @@ import math
 import numpy as np
 import pytest
 
-from agent.config import VehicleConfig
-from mocap_sim.vehicle import VehicleState, step
+from trustfg.agent.config import VehicleConfig
+from trustfg.agent.vehicle import VehicleState, step
 
 
 def test_straight_and_arc_motion_are_exact():

@@ -6,7 +6,6 @@ tests/bridge; the message decoder in tests/agent/test_messages.py.)
 
 import string
 import time
-import tomllib
 import tracemalloc
 
 import msgpack
@@ -14,8 +13,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from agent import messages
-from agent.config import ConfigError, load_scenario, scenario_from_dict
+from trustfg.agent import messages
+from trustfg.agent.config import ConfigError
+from trustfg.agent.scenario_files import load_scenario, scenario_from_dict
 
 SCALARS = st.one_of(st.none(), st.booleans(), st.integers(-2**70, 2**70), st.floats(allow_nan=True),
                     st.text(max_size=20))
@@ -39,7 +39,7 @@ def test_config_loader_refuses_anything_malformed_with_config_error_only(data):
 
 @settings(max_examples=1500, deadline=None)
 @given(st.lists(st.tuples(st.sampled_from(["planner", "world", "sim", "trust"]),
-                          st.sampled_from(["qc", "support_states", "bounds_m", "forgetting", "step_s", "x"]),
+                          st.sampled_from(["qc", "support_states", "bounds_m", "forgetting", "timeout_s", "x"]),
                           TOML_VALUES), max_size=4))
 def test_mutated_valid_scenarios_only_raise_config_error(changes):
     data = {"name": "t", "cars": [{"id": 1, "start": [0.0, 0.0], "goal": [1.0, 0.0]}]}

@@ -10,12 +10,12 @@ import time
 import pytest
 import zenoh
 
-from agent import messages
-from agent.bus import FleetBus, zenoh_config
-from agent.config import BusConfig
-from agent.launch import free_port
-from agent.security import secure_config
 from tests.conftest import ROOT, wait_for
+from trustfg.agent import messages
+from trustfg.agent.config import BusConfig
+from trustfg.fleet.bus import FleetBus, zenoh_config
+from trustfg.fleet.launch import free_port
+from trustfg.fleet.security import secure_config
 
 FLEET = "sec"
 CARS = [1, 2]

@@ -14,17 +14,19 @@ from __future__ import annotations
 import argparse
 import csv
 import json
-import sys
 import threading
 from dataclasses import dataclass
 from pathlib import Path
+
 from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
 
-from agent import messages
-from agent.bus import FleetBus
-from agent.cli import stop_on_signals
-from agent.config import ConfigError, Scenario, dump_scenario, load_scenario, scenario_from_dict
+from trustfg.agent import messages
+from trustfg.agent.config import Scenario
+from trustfg.agent.scenario_files import dump_scenario, load_scenario, scenario_from_dict
+from trustfg.fleet import keys
+from trustfg.fleet.bus import FleetBus
+from trustfg.fleet.command import configured, stop_on_signals
 
 NUMBER = {"type": "number"}
 INTEGER = {"type": "integer"}
@@ -53,7 +55,7 @@ def schema(kind: str) -> bytes:
 
 
 def topic(fleet: str, kind: str, sender: int) -> str:
-    return f"trustfg/{fleet}/{kind}" if kind in ("start", "truth") else f"trustfg/{fleet}/{sender}/{kind}"
+    return keys.fleet_key(fleet, kind) if kind in (keys.START, keys.TRUTH) else keys.key(fleet, sender, kind)
 
 
 class McapRecorder:
@@ -154,15 +156,11 @@ def resolve_run(run: Path) -> Path:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="trustfg record", description="Record a live fleet to an MCAP file.")
-    parser.add_argument("--config", type=Path, required=True, help="fleet config TOML")
+    parser.add_argument("--config", required=True, help="fleet config: a TOML file or a shipped name (lab/fleet)")
     parser.add_argument("--out", type=Path, required=True, help="MCAP file to write")
     parser.add_argument("--listen", action="append", default=[], help="Zenoh endpoint to listen on (repeatable)")
     args = parser.parse_args(argv)
-    try:
-        scenario = load_scenario(args.config)
-    except ConfigError as exc:
-        print(f"trustfg record: {exc}", file=sys.stderr)
-        return 2
+    scenario = configured("trustfg record", lambda: load_scenario(args.config))
     stop = stop_on_signals(threading.Event())
     inbox = messages.Inbox()
     recorder = McapRecorder(args.out, scenario)

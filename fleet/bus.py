@@ -1,14 +1,6 @@
-"""The fleet bus: one Zenoh session per process, the key table of DESIGN.md, and queues.
+"""The fleet bus: one Zenoh session per process, its publishers and subscribers, and queues.
 
-Keys (F the fleet, N the car id):
-
-    trustfg/F/N/plan     Plan         reliable; AdvancedPublisher with a cache of 1, so a
-                                      car that joins late gets every peer's latest plan
-    trustfg/F/N/trust    TrustReport  reliable
-    trustfg/F/N/pose     Pose         best effort, express
-    trustfg/F/N/status   Status       best effort
-    trustfg/F/N/alive    liveliness token of car N's process
-    trustfg/F/start      Start        the operator's go (cached, late joiners get it)
+What is published under which key, and how reliably, is fleet.keys' table.
 
 Zenoh callbacks only hand ``(sender, kind, payload)`` to a bounded queue (the oldest is
 dropped, and counted, when it is full) -- they never decode, block or call into the
@@ -32,37 +24,16 @@ from typing import Callable
 import zenoh
 import zenoh.ext as zext
 
-from agent.config import BusConfig
+from trustfg.agent.config import BusConfig
+from trustfg.fleet.keys import ALIVE, KINDS, START, every_car, fleet_key, key, parse_key
 
 log = logging.getLogger(__name__)
 
-KINDS = ("plan", "trust", "pose", "status")
 CLOSE_TIMEOUT_S = 2.0
-START_KEY = "start"
 
 
 class BusError(RuntimeError):
     """The Zenoh session could not be opened or configured."""
-
-
-def key(fleet: str, car_id: int, kind: str) -> str:
-    return f"trustfg/{fleet}/{car_id}/{kind}"
-
-
-def start_key(fleet: str) -> str:
-    return f"trustfg/{fleet}/{START_KEY}"
-
-
-def parse_key(fleet: str, key_expr: str) -> tuple[int, str] | None:
-    """``trustfg/F/N/kind`` -> (N, kind); ``trustfg/F/start`` -> (0, "start"); else None."""
-    parts = key_expr.split("/")
-    if len(parts) == 3 and parts[:2] == ["trustfg", fleet] and parts[2] == START_KEY:
-        return 0, START_KEY
-    if len(parts) != 4 or parts[:2] != ["trustfg", fleet] or parts[3] not in (*KINDS, "alive"):
-        return None
-    if not parts[2].isdigit() or not 1 <= int(parts[2]) <= 255 or parts[2] != str(int(parts[2])):
-        return None
-    return int(parts[2]), parts[3]
 
 
 def zenoh_config(bus: BusConfig, extra_listen: tuple[str, ...] = ()) -> zenoh.Config:
@@ -149,13 +120,13 @@ class FleetBus:
             self._publishers["status"] = session.declare_publisher(
                 key(fleet, cid, "status"), reliability=zenoh.Reliability.BEST_EFFORT,
                 congestion_control=zenoh.CongestionControl.DROP)
-            self._entities.append(session.liveliness().declare_token(key(fleet, cid, "alive")))
+            self._entities.append(session.liveliness().declare_token(key(fleet, cid, ALIVE)))
         else:
-            self._publishers[START_KEY] = zext.declare_advanced_publisher(
-                session, start_key(fleet), cache=zext.CacheConfig(max_samples=1), publisher_detection=True,
+            self._publishers[START] = zext.declare_advanced_publisher(
+                session, fleet_key(fleet, START), cache=zext.CacheConfig(max_samples=1), publisher_detection=True,
                 sample_miss_detection=zext.MissDetectionConfig(heartbeat=0.5))
         for kind in self.kinds:
-            pattern = f"trustfg/{fleet}/*/{kind}"
+            pattern = every_car(fleet, kind)
             if kind == "plan":
                 subscriber = zext.declare_advanced_subscriber(
                     session, pattern, self._on_sample,
@@ -165,10 +136,10 @@ class FleetBus:
                 subscriber = session.declare_subscriber(pattern, self._on_sample)
             self._entities.append(subscriber)
         self._entities.append(zext.declare_advanced_subscriber(
-            session, start_key(fleet), self._on_sample,
+            session, fleet_key(fleet, START), self._on_sample,
             history=zext.HistoryConfig(detect_late_publishers=True, max_samples=1)))
         self._entities.append(session.liveliness().declare_subscriber(
-            f"trustfg/{fleet}/*/alive", self._on_liveliness, history=True))
+            every_car(fleet, ALIVE), self._on_liveliness, history=True))
 
     def close(self, timeout_s: float = CLOSE_TIMEOUT_S) -> None:
         """Undeclare everything and close the session, giving up after ``timeout_s``:
@@ -234,7 +205,7 @@ class FleetBus:
 
     def _on_liveliness(self, sample: zenoh.Sample) -> None:
         parsed = parse_key(self.fleet, str(sample.key_expr))
-        if parsed is None or parsed[1] != "alive":
+        if parsed is None or parsed[1] != ALIVE:
             return
         up = sample.kind == zenoh.SampleKind.PUT
         self.alive[parsed[0]] = up

@@ -22,16 +22,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from agent import metrics  # noqa: E402
-from agent.config import Scenario  # noqa: E402
-from agent.fleet_sim import RunRecord  # noqa: E402
-
-COLORS = ["tab:blue", "tab:green", "tab:red", "tab:orange", "tab:purple", "tab:brown", "tab:pink",
-          "tab:olive", "tab:cyan", "tab:gray"]
-
-
-def car_colors(scenario: Scenario) -> list[str]:
-    return [c.color or COLORS[i % len(COLORS)] for i, c in enumerate(scenario.cars)]
+from trustfg.agent import metrics  # noqa: E402
+from trustfg.agent.config import Scenario  # noqa: E402
+from trustfg.fleet.fleet_sim import RunRecord  # noqa: E402
 
 
 def draw_world(ax, scenario: Scenario) -> None:
@@ -53,13 +46,13 @@ def draw_world(ax, scenario: Scenario) -> None:
 def plot_trajectories(ax, scenario: Scenario, record: RunRecord, title: str) -> None:
     draw_world(ax, scenario)
     positions = record.states[:, :, :2]
-    colors = car_colors(scenario)
-    breach_distance = 2 * max(record.radii) + metrics.BREACH_CLEARANCE_M
+    colors = scenario.car_colors()
+    breach_distance = metrics.breach_distances(record.radii, scenario.safety.clearance_m)
     diff = positions[:, :, None, :] - positions[:, None, :, :]
     distance = np.sqrt(np.sum(diff * diff, axis=-1))
     n = positions.shape[1]
     distance[:, np.arange(n), np.arange(n)] = np.inf
-    too_close = distance.min(axis=2) < breach_distance  # (T, n)
+    too_close = np.any(distance < breach_distance[None], axis=2)  # (T, n)
     for i in range(n):
         p = positions[:, i]
         ax.plot(p[:, 0], p[:, 1], color=colors[i], lw=2, label=f"car {record.car_ids[i]}")
@@ -72,7 +65,8 @@ def plot_trajectories(ax, scenario: Scenario, record: RunRecord, title: str) -> 
     ax.legend(loc="upper right", fontsize=7)
 
 
-def plot_min_distance(ax, matrix: np.ndarray, ids: list[int], title: str, threshold: float) -> None:
+def plot_min_distance(ax, matrix: np.ndarray, ids: list[int], title: str, threshold: np.ndarray) -> None:
+    """The min-distance matrix; a cell below its pair's ``threshold`` (n, n) in red."""
     shown = matrix.copy()
     np.fill_diagonal(shown, np.nan)
     image = ax.imshow(shown, cmap="viridis", vmin=0.0, vmax=max(1.2, float(np.nanmax(shown))))
@@ -81,11 +75,11 @@ def plot_min_distance(ax, matrix: np.ndarray, ids: list[int], title: str, thresh
         for b in range(n):
             if a == b:
                 continue
-            value = matrix[a, b]
+            value, breach = matrix[a, b], matrix[a, b] < threshold[a, b]
             ax.text(b, a, f"{value:.2f}", ha="center", va="center",
-                    color="red" if value < threshold else "white", fontsize=9,
-                    fontweight="bold" if value < threshold else "normal")
-            if value < threshold:
+                    color="red" if breach else "white", fontsize=9,
+                    fontweight="bold" if breach else "normal")
+            if breach:
                 ax.add_patch(plt.Rectangle((b - 0.5, a - 0.5), 1, 1, fill=False, ec="red", lw=2))
     ax.set_xticks(range(n), [str(i) for i in ids])
     ax.set_yticks(range(n), [str(i) for i in ids])
@@ -96,7 +90,7 @@ def plot_min_distance(ax, matrix: np.ndarray, ids: list[int], title: str, thresh
 def plot_accelerations(ax, scenario: Scenario, record: RunRecord, title: str) -> None:
     acc = metrics.accelerations(record.times, record.states)
     moving = metrics.moving_mask(record.times, record.depart_at, record.arrived_at)
-    colors = car_colors(scenario)
+    colors = scenario.car_colors()
     for i, car_id in enumerate(record.car_ids):
         ax.plot(record.times, np.where(moving[:, i], acc[:, i], np.nan), color=colors[i], label=f"car {car_id}")
     ax.set_xlabel("t (s)")
@@ -106,7 +100,7 @@ def plot_accelerations(ax, scenario: Scenario, record: RunRecord, title: str) ->
 
 
 def plot_trust(ax, scenario: Scenario, record: RunRecord, title: str) -> None:
-    colors = car_colors(scenario)
+    colors = scenario.car_colors()
     n = len(record.car_ids)
     for a in range(n):
         for b in range(n):
@@ -127,7 +121,7 @@ def experiment_figures(name: str, scenario: Scenario, results: dict[str, list[di
     """Write the figures of one experiment; returns their paths."""
     variants = list(records)
     written = []
-    threshold = 2 * max(c.radius_m for c in scenario.cars) + metrics.BREACH_CLEARANCE_M
+    threshold = metrics.breach_distances([c.radius_m for c in scenario.cars], scenario.safety.clearance_m)
 
     fig, axes = plt.subplots(1, len(variants), figsize=(6 * len(variants), 6))
     for ax, variant in zip(np.atleast_1d(axes), variants):

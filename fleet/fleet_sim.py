@@ -1,61 +1,44 @@
 """The fleet in one process: fast, deterministic per seed, with the real parts inside.
 
 Every car is a :class:`CarAgent` (the same planner and trust code the car process runs)
-driving a simulated unicycle (mocap_sim.vehicle) with the tracking controller of the
+driving a simulated unicycle (agent.vehicle) with the tracking controller of the
 bridge (bridge.tracking). Cars see each other through noisy pose observations and talk
 through the fleet message codec (agent.messages: msgpack bytes, decoded and filtered by
 an Inbox per receiver), with a fixed message latency. Time is simulated: a replan takes
 no simulated time, so a run is exactly repeatable from its seed.
 
 Per seed, each car draws a start delay in [0, start_delay_max_s], a cruise speed in
-cruise_speed_range_mps and a replanning phase, so that starts are desynchronised and,
-with avoidance off, conflicting routes really collide.
+cruise_speed_range_mps (:func:`draw_departures`, which ``trustfg sim`` uses too) and a
+replanning phase, so that starts are desynchronised and, with avoidance off, conflicting
+routes really collide. Physics and control step at ``control.command_rate_hz``.
 """
 
 from __future__ import annotations
 
 import heapq
 import math
-from dataclasses import dataclass, field
 
 import numpy as np
 
-from agent import messages
-from agent.car_agent import CarAgent
-from agent.config import Scenario
-from agent.world import build_sdf, SignedDistanceField
-from bridge.tracking import track
-from mocap_sim.vehicle import VehicleState, step as vehicle_step
+from trustfg.agent import messages
+from trustfg.agent.car_agent import CarAgent
+from trustfg.agent.config import Scenario
+from trustfg.agent.vehicle import VehicleState
+from trustfg.agent.vehicle import step as vehicle_step
+from trustfg.agent.world import SignedDistanceField, build_sdf
+from trustfg.bridge.tracking import track
+from trustfg.fleet.runs import RunRecord
 
 RECORD_TRUST_PERIOD_S = 0.1
 
 
-@dataclass
-class RunRecord:
-    """Everything a run produced, for metrics and figures."""
-
-    seed: int
-    car_ids: list[int]
-    radii: list[float]
-    times: np.ndarray
-    """(T,) simulated time of each recorded step."""
-    states: np.ndarray
-    """(T, n, 5): x, y, yaw, v, omega of each car (ground truth)."""
-    arrived_at: list[float | None]
-    depart_at: list[float]
-    trust_times: np.ndarray
-    trust: np.ndarray
-    """(T_trust, n, n): overall trust of truster (row) in trustee (column); diagonal 1."""
-    transparency: np.ndarray
-    """(T_trust, n, n): transparency trust, same layout."""
-    epsilon: np.ndarray
-    """(T_trust, n, n): safety distance each car keeps from each peer."""
-    replan_ms: list[list[float]]
-    counters: list[dict[str, int]]
-    inbox: list[dict[str, int]]
-    final_plans: list[tuple[np.ndarray, np.ndarray]] = field(default_factory=list)
-    plan_log: list = field(default_factory=list)
-    """(t, car index, Plan) of every replan, when simulate(keep_plans=True)."""
+def draw_departures(scenario: Scenario, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """Per car, a start delay U(0, start_delay_max_s) and a cruise speed
+    U(cruise_speed_range_mps), drawn in that order from ``rng``."""
+    n = len(scenario.cars)
+    delay = rng.uniform(0.0, scenario.sim.start_delay_max_s, n)
+    cruise = rng.uniform(*scenario.sim.cruise_speed_range_mps, n)
+    return delay, cruise
 
 
 def simulate(scenario: Scenario, seed: int, sdf: SignedDistanceField | None = None,
@@ -67,9 +50,9 @@ def simulate(scenario: Scenario, seed: int, sdf: SignedDistanceField | None = No
     cars = list(scenario.cars)
     n = len(cars)
     ids = [c.id for c in cars]
-    depart = rng.uniform(0.0, sim.start_delay_max_s, n)
-    cruise = rng.uniform(*sim.cruise_speed_range_mps, n)
+    depart, cruise = draw_departures(scenario, rng)
     control = scenario.control
+    step_s = 1.0 / control.command_rate_hz
     phase = rng.uniform(0.0, control.replan_period_s, n)
     noise_rng = np.random.default_rng([seed, 7])
 
@@ -79,7 +62,7 @@ def simulate(scenario: Scenario, seed: int, sdf: SignedDistanceField | None = No
         for i, c in enumerate(cars)
     ]
     inboxes = [messages.Inbox() for _ in cars]
-    vehicles = [VehicleState(c.start[0], c.start[1], _start_heading(c)) for c in cars]
+    vehicles = [VehicleState(c.start[0], c.start[1], c.start_heading) for c in cars]
 
     queue: list[tuple[float, int, int, bytes]] = []  # (deliver_at, order, sender index, payload)
     order = 0
@@ -89,7 +72,7 @@ def simulate(scenario: Scenario, seed: int, sdf: SignedDistanceField | None = No
         heapq.heappush(queue, (now + sim.message_latency_s, order, sender, messages.encode(message)))
         order += 1
 
-    steps = int(math.ceil(sim.timeout_s / sim.step_s)) + 1
+    steps = int(math.ceil(sim.timeout_s / step_s)) + 1
     times, states = [], []
     trust_times, trust_rows, transparency_rows, epsilon_rows = [], [], [], []
     arrived: list[float | None] = [None] * n
@@ -99,7 +82,7 @@ def simulate(scenario: Scenario, seed: int, sdf: SignedDistanceField | None = No
     next_trust_record = 0.0
 
     for k in range(steps):
-        t = k * sim.step_s
+        t = k * step_s
         # 1. Deliver due messages through each receiver's inbox (decode + order/replay filter).
         while queue and queue[0][0] <= t + 1e-9:
             _, _, sender, payload = heapq.heappop(queue)
@@ -140,7 +123,7 @@ def simulate(scenario: Scenario, seed: int, sdf: SignedDistanceField | None = No
         states.append([[s.x, s.y, s.yaw, s.v, s.omega] for s in vehicles])
         for i, agent in enumerate(agents):
             state = vehicles[i]
-            if arrived[i] is None and math.hypot(state.x - cars[i].goal[0], state.y - cars[i].goal[1]) <= sim.goal_tolerance_m:
+            if arrived[i] is None and math.hypot(state.x - cars[i].goal[0], state.y - cars[i].goal[1]) <= scenario.arrival_radius_m:
                 arrived[i] = t
             if t < depart[i] or agent.plan is None or agent.at_goal:
                 v_cmd, w_cmd = 0.0, 0.0
@@ -148,7 +131,7 @@ def simulate(scenario: Scenario, seed: int, sdf: SignedDistanceField | None = No
                 own = agent.tracks[ids[i]].motion()
                 v_cmd, w_cmd = track(agent.plan, t, own.position[0], own.position[1], own.yaw,
                                      scenario.tracking, scenario.vehicle)
-            vehicles[i] = vehicle_step(state, v_cmd, w_cmd, sim.step_s, scenario.vehicle)
+            vehicles[i] = vehicle_step(state, v_cmd, w_cmd, step_s, scenario.vehicle)
         if all(a is not None for a in arrived) and all(abs(s.v) < 1e-3 for s in vehicles):
             break
 
@@ -186,12 +169,6 @@ def _trust_snapshot(agents: list[CarAgent], ids: list[int], t: float):
             tau = agent.trust.tau(peer, t)
             trust[a, b] = float(np.min(tau))
             transparency[a, b] = float(tau[2])
-            epsilon[a, b] = agent.trust.epsilon(peer, t, planner.epsilon_m, planner.transparency)
+            epsilon[a, b] = agent.trust.epsilon(peer, t, agent.epsilon_0(peer), planner.transparency)
     return trust, transparency, epsilon
 
-
-def _start_heading(car) -> float:
-    if car.start_heading_rad is not None:
-        return car.start_heading_rad
-    target = car.route[0] if car.route else car.goal
-    return math.atan2(target[1] - car.start[1], target[0] - car.start[0])

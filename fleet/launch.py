@@ -44,16 +44,19 @@ from typing import Callable
 
 import numpy as np
 
-from agent import messages, metrics
-from agent.bus import FleetBus
-from agent.cli import stop_on_signals
-from agent.config import ConfigError, Scenario, dump_scenario, load_scenario
-from agent.world import build_sdf
-from dashboard.recording import convert_run
+from trustfg.agent import messages
+from trustfg.agent.config import ConfigError, Scenario
+from trustfg.agent.scenario_files import dump_scenario, load_scenario
+from trustfg.agent.world import build_sdf
+from trustfg.bridge import natnet
+from trustfg.fleet.bus import FleetBus
+from trustfg.fleet.command import configured, stop_on_signals
+from trustfg.fleet.fleet_sim import draw_departures
+from trustfg.fleet.recording import convert_run
+from trustfg.fleet.runs import RunRecord, arrivals, motion_summary
 
 log = logging.getLogger(__name__)
 
-SCENARIOS = Path(__file__).resolve().parent.parent / "deploy" / "scenarios"
 READY_TIMEOUT_S = 30.0
 GRACE_S = 5.0
 START_LEAD_S = 1.0
@@ -65,10 +68,9 @@ def free_port(kind: int = socket.SOCK_STREAM) -> int:
         return s.getsockname()[1]
 
 
-def default_scenario(cars: int | None) -> Path:
-    if cars is not None and cars > 4:
-        return SCENARIOS / "intersection-8.toml"
-    return SCENARIOS / "intersection.toml"
+def default_scenario(cars: int | None) -> str:
+    """The shipped scene ``trustfg sim`` runs without --scenario."""
+    return "intersection-8" if cars is not None and cars > 4 else "intersection"
 
 
 def loopback_fleet(scenario: Scenario, cars: int | None, liar: int | None, misinformation: float,
@@ -110,7 +112,7 @@ class Processes:
 
     def start(self, name: str, args: list[str], log_path: Path, stdout=None) -> subprocess.Popen:
         log_file = open(log_path, "a")
-        argv = self.wrap(name, [sys.executable, "-m", "agent.cli", *args])
+        argv = self.wrap(name, [sys.executable, "-m", "trustfg", *args])
         process = subprocess.Popen(argv, stdout=stdout or log_file, stderr=log_file, start_new_session=True, text=True)
         log_file.close()
         self.children[name] = process
@@ -191,11 +193,8 @@ class Recorder:
 
 
 def departures(scenario: Scenario, seed: int, t_go: float) -> dict[int, tuple[float, float]]:
-    """Desynchronised departures, as agent.fleet_sim draws them for the same seed."""
-    rng = np.random.default_rng(seed)
-    n = len(scenario.cars)
-    delay = rng.uniform(0.0, scenario.sim.start_delay_max_s, n)
-    cruise = rng.uniform(*scenario.sim.cruise_speed_range_mps, n)
+    """Desynchronised departures, as the in-process fleet draws them for the same seed."""
+    delay, cruise = draw_departures(scenario, np.random.default_rng(seed))
     return {car.id: (t_go + float(delay[i]), float(cruise[i])) for i, car in enumerate(scenario.cars)}
 
 
@@ -229,7 +228,7 @@ class RunContext:
 
 
 def run(scenario: Scenario, out: Path, seed: int = 0, timeout_s: float | None = None,
-        natnet_version: str = "3.1", mocap_args: tuple[str, ...] = (), stop: threading.Event | None = None,
+        natnet_version: str = natnet.DEFAULT_STREAM_VERSION, mocap_args: tuple[str, ...] = (), stop: threading.Event | None = None,
         dashboard_port: int | None = None, wrap: Callable[[str, list[str]], list[str]] | None = None,
         schedule: list[tuple[float, Callable[[RunContext], None]]] = (), infra_ip: str = "127.0.0.1") -> dict:
     """Run the fleet to completion; returns the summary (also written to out/summary.json).
@@ -344,51 +343,30 @@ def read_ground_truth(path: Path, ids: list[int]) -> tuple[np.ndarray, np.ndarra
 
 def summarise(scenario: Scenario, out: Path, recorder: Recorder, t_go: float | None,
               crashed: list[str]) -> dict:
+    """The RUN keys (fleet.runs) from mocap-sim's ground truth, plus what only a run of
+    processes has: replan times, messages, command timing, crashes."""
     ids = [c.id for c in scenario.cars]
     times, states = read_ground_truth(out / "ground_truth.csv", ids)
-    radii = np.array([c.radius_m for c in scenario.cars])
-    positions = states[:, :, :2]
-    distance = metrics.min_distance_matrix(positions)
-    clearance = metrics.clearance_matrix(distance, radii)
-    goals = np.array([c.goal for c in scenario.cars])
-    reached_at = []
-    for i in range(len(ids)):
-        near = np.nonzero(np.linalg.norm(positions[:, i] - goals[i], axis=1) <= scenario.sim.goal_tolerance_m)[0]
-        reached_at.append(float(times[near[0]] - (t_go or times[0])) if len(near) else None)
+    rel_times = times - (t_go or times[0])
     depart = [0.0] * len(ids)
     start = next((json.loads(line)["message"] for line in open(out / "messages.jsonl")
                   if '"kind": "start"' in line and '"message"' in line), None)
     if start and t_go is not None:
         depart = [start["cars"][str(i)]["depart"] - t_go for i in ids]
-    rel_times = times - (t_go or times[0])
-    trust = [[1.0 if a == b else _trust(recorder, a, b) for b in ids] for a in ids]
+    record = RunRecord(seed=-1, car_ids=ids, radii=[c.radius_m for c in scenario.cars], times=rel_times,
+                       states=states, arrived_at=arrivals(scenario, rel_times, states), depart_at=depart,
+                       trust_times=np.zeros(0), trust=np.zeros(0), transparency=np.zeros(0),
+                       epsilon=np.zeros(0), replan_ms=[], counters=[], inbox=[])
     stats = {i: _read_json(out / f"car_{i}.json") for i in ids}
-    replan = {str(i): _replan_stats(stats[i]) for i in ids}
-    reached = [r is not None for r in reached_at]
-    summary = {
-        "scenario": scenario.name,
-        "car_ids": ids,
-        "min_distance": _round(distance),
-        "min_clearance": _round(clearance),
-        "breaches": metrics.breaches(clearance, ids),
-        "obstacle_min_clearance": round(metrics.obstacle_min_clearance(positions, radii, build_sdf(scenario.world)), 4),
-        "reached_goal": reached,
-        "makespan_s": round(max(reached_at), 3) if all(reached) else None,
-        "inconsistency": round(metrics.inconsistency_index(rel_times, states, depart, reached_at), 4),
-        "trust": trust,
-        "replan_ms": replan,
+    summary = {"scenario": scenario.name} | motion_summary(scenario, record, build_sdf(scenario.world)) | {
+        "trust": [[1.0 if a == b else _trust(recorder, a, b) for b in ids] for a in ids],
+        "replan_ms": {str(i): _replan_stats(stats[i]) for i in ids},
         "messages": dict(recorder.counts) | {"dropped_by_recorder": dict(recorder.inbox.dropped)},
         "messages_per_car": {str(i): dict(recorder.per_sender.get(i, {})) for i in ids},
         "control": {str(i): (stats[i] or {}).get("control") for i in ids},
         "crashed": sorted(int(name.split()[1]) for name in crashed if name.startswith("car"))
         + (["mocap-sim"] if "mocap-sim" in crashed else []),
     }
-    liars = [c.id for c in scenario.cars if c.misinformation > 0]
-    if liars:
-        liar = ids.index(liars[0])
-        summary["liar_id"] = liars[0]
-        summary["honest_ids"] = [i for i in ids if i not in liars]
-        summary["liar_min_distance"] = [round(float(distance[k, liar]), 4) for k, i in enumerate(ids) if i not in liars]
     return summary
 
 
@@ -414,14 +392,10 @@ def _replan_stats(stats: dict | None) -> dict | None:
             "p95": round(float(np.percentile(values, 95)), 2), "max": round(float(values.max()), 2)}
 
 
-def _round(matrix: np.ndarray) -> list[list[float]]:
-    return [[round(float(x), 4) for x in row] for row in matrix]
-
-
 def print_summary(summary: dict) -> None:
     ids = summary["car_ids"]
     print(f"\n== trustfg sim: {summary['scenario']}, cars {ids}")
-    print(f"breaches (clearance < 0.1 m): {summary['breaches'] or 'none'}")
+    print(f"breaches (pairs closer than the required clearance): {summary['breaches'] or 'none'}")
     print(f"reached goal: {summary['reached_goal']}, makespan {summary['makespan_s']} s, "
           f"obstacle clearance {summary['obstacle_min_clearance']} m")
     print("min distance matrix (m):")
@@ -450,15 +424,17 @@ def _port_free(port: int) -> bool:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="trustfg sim", description=__doc__.split("\n")[0])
-    parser.add_argument("--scenario", type=Path, default=None,
-                        help="scenario TOML (default: intersection, or intersection-8 for more than 4 cars)")
+    parser.add_argument("--scenario", default=None,
+                        help="a scenario file, or a shipped scene's name (default: intersection, or "
+                             "intersection-8 for more than 4 cars)")
     parser.add_argument("--cars", type=int, default=None, help="use the first N cars of the scenario")
     parser.add_argument("--liar", type=int, default=None, help="car id that publishes falsified plans")
     parser.add_argument("--misinformation", type=float, default=0.4, help="the liar's fraction of false plans")
     parser.add_argument("--out", type=Path, default=None, help="run folder (default runs/sim-<time>)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the departures and cruise speeds")
     parser.add_argument("--timeout", type=float, default=None, help="seconds after the start (default: scenario's + 15)")
-    parser.add_argument("--natnet-version", choices=["3.0", "3.1", "4.0", "4.1"], default="3.1")
+    parser.add_argument("--natnet-version", choices=natnet.STREAM_VERSIONS, default=natnet.DEFAULT_STREAM_VERSION,
+                        help="NatNet version mocap-sim streams (default %(default)s)")
     parser.add_argument("--no-dashboard", action="store_true", help="do not start the dashboard")
     parser.add_argument("--dashboard-port", type=int, default=8765, help="dashboard port (0: any free one)")
     parser.add_argument("--mocap", action="append", default=[], metavar="ARG",
@@ -468,12 +444,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("--cars must be at least 1")
     if not 0.0 <= args.misinformation <= 1.0:
         parser.error("--misinformation must be within [0, 1]")
-    try:
-        scenario = load_scenario(args.scenario or default_scenario(args.cars))
-        fleet = loopback_fleet(scenario, args.cars, args.liar, args.misinformation)
-    except ConfigError as exc:
-        print(f"trustfg sim: {exc}", file=sys.stderr)
-        return 2
+    fleet = configured("trustfg sim", lambda: loopback_fleet(
+        load_scenario(args.scenario or default_scenario(args.cars)), args.cars, args.liar, args.misinformation))
     out = args.out or Path("runs") / time.strftime("sim-%Y%m%d-%H%M%S")
     stop = stop_on_signals(threading.Event())
     try:

@@ -29,6 +29,8 @@ import json
 import sys
 from pathlib import Path
 
+from trustfg.fleet import keys
+
 ALL_MESSAGES = ["put", "delete", "declare_subscriber", "query", "declare_queryable", "reply",
                 "liveliness_token", "declare_liveliness_subscriber", "liveliness_query"]
 READ = ["declare_subscriber", "declare_liveliness_subscriber", "query", "liveliness_query"]
@@ -44,14 +46,8 @@ def certificate_names(certs: Path, identity: str) -> dict[str, str]:
     return {k: str(p.resolve()) for k, p in paths.items()}
 
 
-def own_keys(fleet: str, car: int) -> list[str]:
-    """Key expressions that are car's own: its messages and its publishers' machinery
-    (advanced publishers answer history queries and declare tokens under ``@adv``)."""
-    return [f"trustfg/{fleet}/{car}/**", f"trustfg/{fleet}/{car}/**/@adv/**"]
-
-
 def access_control(fleet: str, cars: list[int]) -> dict:
-    everything = [f"trustfg/{fleet}/**", f"trustfg/{fleet}/**/@adv/**"]
+    everything = keys.fleet_tree(fleet)
     rules = [
         {"id": "send-anything", "permission": "allow", "flows": ["egress"], "messages": ALL_MESSAGES,
          "key_exprs": ["**", "**/@adv/**"]},
@@ -59,16 +55,16 @@ def access_control(fleet: str, cars: list[int]) -> dict:
          "key_exprs": everything},
         # Advanced subscribers announce themselves with tokens under @adv of what they read.
         {"id": "subscriber-tokens", "permission": "allow", "flows": ["ingress"], "messages": ["liveliness_token"],
-         "key_exprs": [f"trustfg/{fleet}/**/@adv/**"]},
+         "key_exprs": everything[1:]},
         {"id": "operator-start", "permission": "allow", "flows": ["ingress"], "messages": WRITE + ["liveliness_token"],
-         "key_exprs": [f"trustfg/{fleet}/start", f"trustfg/{fleet}/start/@adv/**"]},
+         "key_exprs": keys.fleet_key_tree(fleet, keys.START)},
     ]
     subjects = [{"id": "operator", "cert_common_names": ["operator"]}]
     policies = [{"id": "operator", "rules": ["send-anything", "read-the-fleet", "subscriber-tokens", "operator-start"],
                  "subjects": ["operator"]}]
     for car in cars:
         rules.append({"id": f"car{car}-own-keys", "permission": "allow", "flows": ["ingress"],
-                      "messages": WRITE + ["liveliness_token"], "key_exprs": own_keys(fleet, car)})
+                      "messages": WRITE + ["liveliness_token"], "key_exprs": keys.car_tree(fleet, car)})
         subjects.append({"id": f"car{car}", "cert_common_names": [f"car{car}"]})
         policies.append({"id": f"car{car}", "rules": ["send-anything", "read-the-fleet", "subscriber-tokens",
                                                        f"car{car}-own-keys"], "subjects": [f"car{car}"]})

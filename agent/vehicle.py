@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agent.config import VehicleConfig
+from trustfg.agent.config import VehicleConfig
 
 
 @dataclass(frozen=True)

@@ -25,8 +25,8 @@ import logging
 import os
 import random
 import secrets
-import signal
 import shutil
+import signal
 import subprocess
 import threading
 import time

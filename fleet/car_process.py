@@ -4,7 +4,7 @@ Threads, each owning what it touches:
 
 * the NatNet client's socket thread hands every frame to a queue (and keeps the latest
   pose of every rigid body);
-* Zenoh's callbacks hand every fleet message to the bus queue (agent.bus);
+* Zenoh's callbacks hand every fleet message to the bus queue (trustfg.fleet.bus);
 * the control thread, at ``control.command_rate_hz`` on absolute deadlines, reads the
   car's own latest pose and the current plan and sends one command datagram: the
   tracking command, or STOP when there is no fresh pose (older than
@@ -45,18 +45,20 @@ from pathlib import Path
 
 import numpy as np
 
-from agent import messages
-from agent.bus import FleetBus, Received
-from agent.car_agent import CarAgent, _standing
-from agent.cli import stop_on_signals
-from agent.config import CarConfig, ConfigError, Scenario, load_scenario, parse_udp_address
-from agent.ticker import ticks
-from agent.world import build_sdf
-from bridge import natnet
-from bridge.carlink import CommandSender, Flags
-from bridge.guard import speed_cap
-from bridge.natnet_client import NatNetClient, NatNetClientOptions
-from bridge.tracking import track
+from trustfg.agent import messages
+from trustfg.agent.car_agent import CarAgent
+from trustfg.agent.config import CarConfig, ConfigError, Scenario, parse_udp_address
+from trustfg.agent.gp import standing
+from trustfg.agent.scenario_files import load_scenario
+from trustfg.agent.world import build_sdf
+from trustfg.bridge import natnet
+from trustfg.bridge.carlink import CommandSender, Flags
+from trustfg.bridge.guard import speed_cap
+from trustfg.bridge.natnet_client import NatNetClient, NatNetClientOptions
+from trustfg.bridge.tracking import track
+from trustfg.fleet.bus import FleetBus, Received
+from trustfg.fleet.command import configured, stop_on_signals
+from trustfg.fleet.ticker import ticks
 
 log = logging.getLogger(__name__)
 
@@ -67,8 +69,13 @@ STUCK_MOTION_MPS = 0.03
 
 
 def natnet_options(scenario: Scenario) -> NatNetClientOptions:
+    """The NatNet client's options from the config; ConfigError for a version the codec
+    does not decode."""
     n = scenario.natnet
-    version = natnet.Version(*map(int, n.version.split("."))) if n.version else None
+    if n.version and n.version not in natnet.STREAM_VERSIONS:
+        raise ConfigError(f"natnet.version: {n.version} is not one the bridge decodes "
+                          f"({', '.join(natnet.STREAM_VERSIONS)})")
+    version = natnet.Version.parse(n.version) if n.version else None
     return NatNetClientOptions(
         server_address=n.server, command_port=n.command_port, multicast=n.mode == "multicast",
         multicast_group=n.multicast_group, data_port=n.data_port, local_address=n.local_interface,
@@ -111,6 +118,7 @@ class CarProcess:
         self.scenario = scenario
         self.car = car
         self.clock = clock
+        self.natnet = natnet_options(scenario)
         self.stop = threading.Event()
         self.agent = CarAgent(car=car, scenario=scenario, sdf=build_sdf(scenario.world),
                               depart_at=math.inf)
@@ -178,8 +186,8 @@ class CarProcess:
         return natnet.to_ground_plane(sample.body.position, sample.body.orientation,
                                       self.scenario.natnet.up_axis)
 
-    def _others_seen(self, natnet_client: NatNetClient) -> list[tuple[float, float, float]]:
-        """Fresh, tracked positions of every other car of the fleet."""
+    def _others_seen(self, natnet_client: NatNetClient) -> list[tuple[float, float, float, float]]:
+        """Fresh, tracked poses (x, y, yaw) and radii of every other car of the fleet."""
         now_mono, up = time.monotonic(), self.scenario.natnet.up_axis
         others = []
         for body_id, sample in natnet_client.latest_all().items():
@@ -189,7 +197,7 @@ class CarProcess:
                 continue
             x, y, yaw = natnet.to_ground_plane(sample.body.position, sample.body.orientation, up)
             if math.isfinite(x) and math.isfinite(y) and math.isfinite(yaw):
-                others.append((x, y, yaw))
+                others.append((x, y, yaw, self.agent.radius(car_id)))
         return others
 
     def _control_loop(self, natnet_client: NatNetClient, sender: CommandSender) -> None:
@@ -218,8 +226,8 @@ class CarProcess:
             v, omega = track(plan, now, pose[0], pose[1], pose[2], self.scenario.tracking,
                              self.scenario.vehicle)
             if self.scenario.guard.enabled:
-                cap = speed_cap(*pose, self._others_seen(natnet_client), self.scenario.guard,
-                                self.agent.sdf, self.car.radius_m)
+                cap = speed_cap(*pose, self.car.radius_m, self._others_seen(natnet_client),
+                                self.scenario.guard, self.scenario.safety, self.agent.sdf)
                 if v > cap:
                     v = cap
                     self.control.guard_limited += 1
@@ -254,7 +262,7 @@ class CarProcess:
         sys.setswitchinterval(SWITCH_INTERVAL_S)
         log.info("car %d: NatNet %s at %s, link %s", car.id, scenario.natnet.mode, scenario.natnet.server, car.link)
         with CommandSender(car.id, (host, port), rate_hz=control.command_rate_hz, stamp_clock=self.clock) as sender, \
-                NatNetClient(natnet_options(scenario), on_frame=self._on_frame) as natnet_client, \
+                NatNetClient(self.natnet, on_frame=self._on_frame) as natnet_client, \
                 FleetBus(scenario.bus, scenario.fleet, car.id, listen=car.listen, clock=self.clock) as bus:
             controller = threading.Thread(target=self._control_loop, args=(natnet_client, sender),
                                           name=f"control-{car.id}", daemon=True)
@@ -302,7 +310,7 @@ class CarProcess:
                 own = self.agent.tracks.get(self.car.id)
                 motion = own.motion() if own else None
                 if outgoing is not None and self.stuck and motion is not None:  # the truth: standing still
-                    outgoing = dataclasses.replace(outgoing, plan=_standing(motion.position, now))
+                    outgoing = dataclasses.replace(outgoing, plan=standing(motion.position, now))
                 if outgoing is not None:
                     bus.publish("plan", messages.encode(outgoing))
             if now >= next_trust:
@@ -321,7 +329,7 @@ class CarProcess:
             own = self.agent.tracks.get(self.car.id)
             motion = own.motion() if own else None
             if motion is not None:  # show where we stand until we may go
-                self.agent.plan = _standing(motion.position, now)
+                self.agent.plan = standing(motion.position, now)
         else:
             try:
                 self.agent.replan(now)
@@ -381,15 +389,13 @@ class CarProcess:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="trustfg car", description="Run one car: agent and bridge.")
     parser.add_argument("--id", type=int, required=True, help="this car's id (a [[cars]] entry of the config)")
-    parser.add_argument("--config", required=True, type=Path, help="fleet config TOML (deploy/...)")
+    parser.add_argument("--config", required=True, help="fleet config: a TOML file or a shipped name (lab/fleet)")
     parser.add_argument("--stats", type=Path, default=None, help="write a JSON summary here at exit")
     args = parser.parse_args(argv)
-    try:
+    def build() -> CarProcess:
         scenario = load_scenario(args.config)
-        car = scenario.car(args.id)
-        process = CarProcess(scenario, car)
-    except ConfigError as exc:
-        print(f"trustfg car: {exc}", file=sys.stderr)
-        return 2
+        return CarProcess(scenario, scenario.car(args.id))
+
+    process = configured("trustfg car", build)
     stop_on_signals(process.stop)
     return process.run(args.stats)

@@ -30,19 +30,20 @@ from typing import Callable
 
 import numpy as np
 
-from agent import metrics
-from agent.config import Scenario, load_scenario
-from agent.fleet_sim import RunRecord, simulate
-from agent.world import build_sdf
+from trustfg.agent import metrics
+from trustfg.agent.config import Scenario
+from trustfg.agent.scenario_files import load_scenario
+from trustfg.agent.world import build_sdf
+from trustfg.fleet.command import configured
+from trustfg.fleet.fleet_sim import simulate
+from trustfg.fleet.runs import RunRecord, motion_summary, rounded
 
 log = logging.getLogger(__name__)
 
-SCENARIOS = Path(__file__).resolve().parent.parent / "deploy" / "scenarios"
 LIAR_ID = 1
 LIAR_MISINFORMATION = 0.4
 TRUST_GAP = 0.2
 TRUST_SETTLE_S = 3.0
-HONEST_TRUST_FLOOR = 0.8
 
 
 def factors(scenario: Scenario, **switches: bool) -> Scenario:
@@ -71,21 +72,21 @@ class Experiment:
 
 EXPERIMENTS = {
     "proximity": Experiment(
-        "proximity", "intersection.toml",
+        "proximity", "intersection",
         {"on": functools.partial(factors, **ALL_ON), "off": functools.partial(factors, **ALL_OFF)},
         "Do the trust factors prevent proximity breaches on conflicting routes?"),
     "consistency": Experiment(
-        "consistency", "intersection.toml",
+        "consistency", "intersection",
         {"on": functools.partial(factors, **ALL_ON),
          "off": functools.partial(factors, **(ALL_ON | dict(consistency=False)))},
         "Does the consistency factor make the cars' accelerations more alike?"),
     "transparency": Experiment(
-        "transparency", "lab.toml",
+        "transparency", "lab",
         {"on": lambda s: factors(with_liar(s), **ALL_ON),
          "off": lambda s: factors(with_liar(s), **(ALL_ON | dict(transparency=False)))},
         "Do honest cars keep a wider berth from a car that publishes 40 % misinformation?"),
     "lab": Experiment(
-        "lab", "lab.toml",
+        "lab", "lab",
         {"A": functools.partial(factors, **ALL_ON),
          "on": lambda s: factors(with_liar(s), **ALL_ON),
          "off": lambda s: factors(with_liar(s), **(ALL_ON | dict(transparency=False)))},
@@ -108,33 +109,14 @@ def run_one(scenario: Scenario, seed: int) -> tuple[dict, RunRecord]:
 
 
 def summarise(scenario: Scenario, record: RunRecord) -> dict:
-    positions = record.states[:, :, :2]
-    radii = np.array(record.radii)
-    distance = metrics.min_distance_matrix(positions)
-    clearance = metrics.clearance_matrix(distance, radii)
-    arrived = record.arrived_at
-    reached = [a is not None for a in arrived]
-    run = {
-        "seed": record.seed,
-        "car_ids": record.car_ids,
-        "min_distance": _round(distance),
-        "min_clearance": _round(clearance),
-        "breaches": metrics.breaches(clearance, record.car_ids),
-        "obstacle_min_clearance": round(metrics.obstacle_min_clearance(positions, radii, _sdf(scenario.world)), 4),
-        "reached_goal": reached,
-        "makespan_s": round(max(arrived), 3) if all(reached) else None,
-        "inconsistency": round(metrics.inconsistency_index(record.times, record.states, record.depart_at, arrived), 4),
-        "trust": _round(record.trust[-1]),
+    run = {"seed": record.seed} | motion_summary(scenario, record, _sdf(scenario.world)) | {
+        "trust": rounded(record.trust[-1]),
         "replan_ms_median": round(float(np.median(np.concatenate(record.replan_ms))), 2)
         if any(record.replan_ms) else None,
     }
-    liars = [c.id for c in scenario.cars if c.misinformation > 0]
-    if liars:
-        liar = record.car_ids.index(liars[0])
-        honest = [i for i, c in enumerate(record.car_ids) if record.car_ids[i] not in liars]
-        run["liar_id"] = liars[0]
-        run["honest_ids"] = [record.car_ids[i] for i in honest]
-        run["liar_min_distance"] = [round(float(distance[i, liar]), 4) for i in honest]
+    if "liar_id" in run:
+        liar = record.car_ids.index(run["liar_id"])
+        honest = [record.car_ids.index(i) for i in run["honest_ids"]]
         after = record.trust_times >= TRUST_SETTLE_S
         honest_pairs = [record.trust[after][:, a, b] for a in honest for b in honest if a != b]
         run["honest_trust_min_after_settle"] = round(float(np.min(honest_pairs)), 4) if honest_pairs else None
@@ -143,10 +125,6 @@ def summarise(scenario: Scenario, record: RunRecord) -> dict:
         run["trust_gap_min_after_settle"] = round(float(np.min(gaps)), 4)
         run["trust_separated_at_s"] = metrics.trust_separation(record.trust_times, record.trust, liar, honest, TRUST_GAP)
     return run
-
-
-def _round(matrix: np.ndarray) -> list[list[float]]:
-    return [[round(float(x), 4) for x in row] for row in matrix]
 
 
 # --- a whole experiment ------------------------------------------------------------------------
@@ -160,8 +138,8 @@ def _job(args: tuple[Scenario, int]) -> tuple[dict, RunRecord]:
 def run_experiment(name: str, seeds: list[int], out: Path, jobs: int, scenario_file: str | None = None,
                    figures: bool = True) -> dict:
     experiment = EXPERIMENTS[name]
-    path = Path(scenario_file) if scenario_file else SCENARIOS / experiment.scenario_file
-    base = load_scenario(path)
+    source = scenario_file or experiment.scenario_file
+    base = load_scenario(source)
     results: dict[str, list[dict]] = {}
     records: dict[str, list[RunRecord]] = {}
     started = time.perf_counter()
@@ -177,7 +155,7 @@ def run_experiment(name: str, seeds: list[int], out: Path, jobs: int, scenario_f
     progress.done()
     report = {
         "experiment": name,
-        "scenario": path.name,
+        "scenario": Path(str(source)).name,
         "question": experiment.question,
         "seeds": seeds,
         "variants": results,
@@ -188,8 +166,8 @@ def run_experiment(name: str, seeds: list[int], out: Path, jobs: int, scenario_f
     target.mkdir(parents=True, exist_ok=True)
     (target / "metrics.json").write_text(json.dumps(report, indent=1))
     if figures:
-        from dashboard import figures as fig  # matplotlib only when figures are wanted
-        fig.experiment_figures(name, load_scenario(path), results, records, target)
+        from trustfg.fleet import figures as fig  # matplotlib only when figures are wanted
+        fig.experiment_figures(name, base, results, records, target)
     return report
 
 
@@ -325,7 +303,9 @@ def main(argv: list[str] | None = None) -> int:
                         help="output folder (default runs/experiment-<time>)")
     parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
                         help="parallel simulations (default: one per core)")
-    parser.add_argument("--scenario", default=None, help="scenario TOML instead of the experiment's own")
+    parser.add_argument("--scenario", default=None,
+                        help="a scenario file or shipped scene's name instead of the experiment's own "
+                             "(proximity, consistency: intersection; transparency, lab: lab)")
     parser.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     args = parser.parse_args(argv)
     if args.seeds < 1:
@@ -333,6 +313,8 @@ def main(argv: list[str] | None = None) -> int:
     out = args.out or Path("runs") / time.strftime("experiment-%Y%m%d-%H%M%S")
     names = list(EXPERIMENTS) if args.name == "all" else [args.name]
     seeds = list(range(args.seed, args.seed + args.seeds))
+    if args.scenario:
+        configured("trustfg experiment", lambda: load_scenario(args.scenario))
     for name in names:
         report = run_experiment(name, seeds, out, args.jobs, args.scenario, figures=not args.no_figures)
         print_table(report)

@@ -35,9 +35,9 @@ from __future__ import annotations
 
 import argparse
 import csv
-import signal
 import dataclasses
 import json
+import signal
 import socket
 import sys
 import tempfile
@@ -46,13 +46,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
-import numpy as np
+from trustfg.agent.scenario_files import load_scenario
+from trustfg.fleet import netem
+from trustfg.fleet.launch import START_LEAD_S, RunContext, free_port, loopback_fleet, run
 
-from agent.config import dump_scenario, load_scenario
-from agent.launch import START_LEAD_S, RunContext, free_port, loopback_fleet, run
-from mocap_sim import netem
-
-SCENARIO = Path(__file__).resolve().parent.parent / "deploy" / "scenarios" / "intersection.toml"
+SCENARIO = "intersection"
 VICTIM = 2
 FRESH_PLAN_MS = 1000
 

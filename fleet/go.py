@@ -12,27 +12,22 @@ import argparse
 import sys
 import threading
 import time
-from pathlib import Path
 
-from agent import messages
-from agent.bus import BusError, FleetBus
-from agent.cli import stop_on_signals
-from agent.config import ConfigError, load_scenario
+from trustfg.agent import messages
+from trustfg.agent.scenario_files import load_scenario
+from trustfg.fleet.bus import BusError, FleetBus
+from trustfg.fleet.command import configured, stop_on_signals
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="trustfg go", description=__doc__.split("\n")[0])
-    parser.add_argument("--config", type=Path, required=True, help="fleet config TOML")
+    parser.add_argument("--config", required=True, help="fleet config: a TOML file or a shipped name (lab/fleet)")
     parser.add_argument("--lead", type=float, default=2.0, help="seconds from now to the first departure")
     parser.add_argument("--stagger", type=float, default=0.0, help="extra seconds per car, in id order")
     parser.add_argument("--cruise", type=float, default=None, help="cruise speed, m/s (default: planner's)")
     parser.add_argument("--listen", action="append", default=[], help="Zenoh endpoint to listen on (repeatable)")
     args = parser.parse_args(argv)
-    try:
-        fleet = load_scenario(args.config)
-    except ConfigError as exc:
-        print(f"trustfg go: {exc}", file=sys.stderr)
-        return 2
+    fleet = configured("trustfg go", lambda: load_scenario(args.config))
     cruise = args.cruise or fleet.planner.cruise_speed_mps
     if not 0 < cruise <= fleet.vehicle.max_speed_mps:
         parser.error(f"--cruise must be within (0, {fleet.vehicle.max_speed_mps}]")

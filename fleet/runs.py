@@ -1,0 +1,84 @@
+"""A run of the fleet, however it was made, and the one summary of its executed motion.
+
+The in-process fleet (fleet.fleet_sim) returns a :class:`RunRecord`; ``trustfg sim``
+builds one from mocap-sim's ground truth, ``trustfg report`` from a recording. All three
+summarise it with :func:`motion_summary` (the RUN keys documented in the README), so a
+breach, an arrival or a makespan means the same everywhere.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from trustfg.agent import metrics
+from trustfg.agent.config import Scenario
+from trustfg.agent.world import SignedDistanceField
+
+
+@dataclass
+class RunRecord:
+    """Everything a run produced, for metrics and figures."""
+
+    seed: int
+    car_ids: list[int]
+    radii: list[float]
+    times: np.ndarray
+    """(T,) time of each recorded step, seconds from the run's start."""
+    states: np.ndarray
+    """(T, n, 5): x, y, yaw, v, omega of each car (ground truth)."""
+    arrived_at: list[float | None]
+    depart_at: list[float]
+    trust_times: np.ndarray
+    trust: np.ndarray
+    """(T_trust, n, n): overall trust of truster (row) in trustee (column); diagonal 1."""
+    transparency: np.ndarray
+    """(T_trust, n, n): transparency trust, same layout."""
+    epsilon: np.ndarray
+    """(T_trust, n, n): safety distance each car keeps from each peer."""
+    replan_ms: list[list[float]]
+    counters: list[dict[str, int]]
+    inbox: list[dict[str, int]]
+    final_plans: list[tuple[np.ndarray, np.ndarray]] = field(default_factory=list)
+    plan_log: list = field(default_factory=list)
+    """(t, car index, Plan) of every replan, when simulate(keep_plans=True)."""
+
+
+def arrivals(scenario: Scenario, times: np.ndarray, states: np.ndarray) -> list[float | None]:
+    """When each car first came within the scenario's arrival radius of its goal."""
+    goals = np.array([car.goal for car in scenario.cars])
+    return metrics.reached_at(times, states[:, :, :2], goals, scenario.arrival_radius_m)
+
+
+def motion_summary(scenario: Scenario, record: RunRecord, sdf: SignedDistanceField) -> dict:
+    """The RUN keys that come from executed motion: distances, breaches, arrivals,
+    inconsistency, and (with a liar) how close the honest cars came to it."""
+    positions = record.states[:, :, :2]
+    radii = np.array(record.radii)
+    distance = metrics.min_distance_matrix(positions)
+    clearance = metrics.clearance_matrix(distance, radii)
+    arrived = record.arrived_at
+    reached = [a is not None for a in arrived]
+    run = {
+        "car_ids": record.car_ids,
+        "min_distance": rounded(distance),
+        "min_clearance": rounded(clearance),
+        "breaches": metrics.breaches(clearance, record.car_ids, scenario.safety.clearance_m),
+        "obstacle_min_clearance": round(metrics.obstacle_min_clearance(positions, radii, sdf), 4),
+        "reached_goal": reached,
+        "makespan_s": round(max(arrived), 3) if all(reached) else None,
+        "inconsistency": round(metrics.inconsistency_index(record.times, record.states, record.depart_at, arrived), 4),
+    }
+    liars = [c.id for c in scenario.cars if c.misinformation > 0]
+    if liars:
+        liar = record.car_ids.index(liars[0])
+        honest = [i for i, car_id in enumerate(record.car_ids) if car_id not in liars]
+        run["liar_id"] = liars[0]
+        run["honest_ids"] = [record.car_ids[i] for i in honest]
+        run["liar_min_distance"] = [round(float(distance[i, liar]), 4) for i in honest]
+    return run
+
+
+def rounded(matrix: np.ndarray) -> list[list[float]]:
+    return [[round(float(x), 4) for x in row] for row in matrix]

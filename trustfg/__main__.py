@@ -1,0 +1,7 @@
+"""``python -m trustfg``: the same as the ``trustfg`` command."""
+
+import sys
+
+from trustfg.cli import main
+
+sys.exit(main())

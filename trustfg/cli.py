@@ -1,0 +1,50 @@
+"""The ``trustfg`` command: one entry point, one subcommand per process kind.
+
+Each subcommand lives in its own module with a ``main(argv) -> int``; this module only
+dispatches (importing the one it runs), so ``trustfg car`` does not import the
+dashboard's web stack and the like. It sits above every layer.
+"""
+
+from __future__ import annotations
+
+import importlib
+import logging
+import sys
+
+COMMANDS = {
+    "sim": ("trustfg.fleet.launch", "the main job: a whole fleet as OS processes with mocap-sim"),
+    "car": ("trustfg.fleet.car_process", "one car's process: agent and bridge (lab or simulation)"),
+    "mocap-sim": ("trustfg.mocap_sim.sim", "simulated cars and OptiTrack (NatNet) for a fleet config"),
+    "faults": ("trustfg.fleet.faults", "the fault matrix: a fleet in network namespaces under each fault (root)"),
+    "go": ("trustfg.fleet.go", "the operator's start signal for a fleet in the lab"),
+    "dashboard": ("trustfg.dashboard.server", "the live web page of a fleet, or a recorded run replayed"),
+    "record": ("trustfg.fleet.recording", "record a live fleet to an MCAP file"),
+    "report": ("trustfg.dashboard.report", "figures and an HTML report from a recorded run"),
+    "secure-config": ("trustfg.fleet.security", "Zenoh mutual-TLS and access-control config for one fleet member"),
+    "experiment": ("trustfg.fleet.experiments", "run the paper's experiments in the in-process simulation"),
+}
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv or argv[0] in ("-h", "--help"):
+        print("usage: trustfg COMMAND [options]\n\ncommands:")
+        for name, (_, text) in COMMANDS.items():
+            print(f"  {name:<13} {text}")
+        print("\n'trustfg COMMAND --help' tells more.")
+        return 0 if argv else 2
+    name, rest = argv[0], argv[1:]
+    if name not in COMMANDS:
+        print(f"trustfg: unknown command {name!r} (try 'trustfg --help')", file=sys.stderr)
+        return 2
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    module = importlib.import_module(COMMANDS[name][0])
+    try:
+        return int(module.main(rest) or 0)
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())
