@@ -1,0 +1,83 @@
+"""Every tunable of trustfg, typed, in one place.
+
+A scenario file is TOML. Its tables map onto the dataclasses below (units in the field
+names or docstrings); anything a file leaves out keeps the default written here. A file
+with an unknown key, a value of the wrong type or an out-of-range value is refused with a
+:class:`ConfigError` naming the offending key, e.g. ``planner.support_states: expected
+an integer, got 'many'``.
+
+Layering: built-in defaults <- scenario file <- command-line overrides
+(``with_overrides``). A car's own table (``[[cars]]``) holds what differs per car.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from .checks import ConfigError, parse_udp_address, positive, with_overrides
+from .planning import PlannerConfig, TrustConfig
+from .running import BusConfig, ControlConfig, GuardConfig, NatNetConfig, TrackingConfig, VehicleConfig
+from .scene import CarConfig, Obstacle, SafetyConfig, SimConfig, WorldConfig
+
+__all__ = [
+    "ConfigError", "parse_udp_address", "positive", "with_overrides", "PlannerConfig", "TrustConfig",
+    "BusConfig", "ControlConfig", "GuardConfig", "NatNetConfig", "TrackingConfig", "VehicleConfig",
+    "CarConfig", "Obstacle", "SafetyConfig", "SimConfig", "WorldConfig", "Scenario", "PALETTE",
+]
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A whole fleet on a map: what ``--scenario FILE`` loads."""
+
+    name: str
+    cars: tuple[CarConfig, ...]
+    fleet: str = "demo"
+    world: WorldConfig = field(default_factory=WorldConfig)
+    planner: PlannerConfig = field(default_factory=PlannerConfig)
+    trust: TrustConfig = field(default_factory=TrustConfig)
+    safety: SafetyConfig = field(default_factory=SafetyConfig)
+    vehicle: VehicleConfig = field(default_factory=VehicleConfig)
+    tracking: TrackingConfig = field(default_factory=TrackingConfig)
+    guard: GuardConfig = field(default_factory=GuardConfig)
+    sim: SimConfig = field(default_factory=SimConfig)
+    control: ControlConfig = field(default_factory=ControlConfig)
+    bus: BusConfig = field(default_factory=BusConfig)
+    natnet: NatNetConfig = field(default_factory=NatNetConfig)
+
+    def validate(self, path: str = "") -> None:
+        prefix = f"{path}." if path else ""
+        if not self.cars:
+            raise ConfigError(f"{prefix}cars: a scenario needs at least one car")
+        ids = [car.id for car in self.cars]
+        if len(set(ids)) != len(ids):
+            raise ConfigError(f"{prefix}cars: car ids must be unique, got {ids}")
+        for i, car in enumerate(self.cars):
+            car.validate(f"{prefix}cars[{i}]")
+        bodies = [car.body_id for car in self.cars]
+        if len(set(bodies)) != len(bodies):
+            raise ConfigError(f"{prefix}cars: rigid-body ids must be unique, got {bodies}")
+        for name in ("world", "safety", "planner", "trust", "vehicle", "tracking", "guard", "sim", "control", "bus", "natnet"):
+            getattr(self, name).validate(prefix + name)
+
+    def car(self, car_id: int) -> CarConfig:
+        for car in self.cars:
+            if car.id == car_id:
+                return car
+        raise ConfigError(f"cars: no car with id {car_id} (have {[c.id for c in self.cars]})")
+
+    @property
+    def arrival_radius_m(self) -> float:
+        """How close to its goal the judge (metrics on ground truth) counts a car as
+        arrived: twice the car's own goal tolerance -- the car stops once it *sees* itself
+        within the tolerance, so its true position may be off by pose error and braking."""
+        return 2.0 * self.tracking.goal_tolerance_m
+
+    def car_colors(self) -> list[str]:
+        """Every car's colour (matplotlib names): its own, else the next of PALETTE."""
+        return [car.color or PALETTE[i % len(PALETTE)] for i, car in enumerate(self.cars)]
+
+
+PALETTE = ("tab:blue", "tab:green", "tab:red", "tab:orange", "tab:purple", "tab:brown", "tab:pink",
+           "tab:olive", "tab:cyan", "tab:gray")
+"""Colours of cars that do not name their own, in order (figures and the dashboard)."""

@@ -1,0 +1,162 @@
+"""How a car runs: its body's limits, its controller and guard, its rhythm, and its links
+(the fleet bus, NatNet)."""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+from .checks import ConfigError, positive
+
+
+@dataclass(frozen=True)
+class VehicleConfig:
+    """Unicycle limits of a car (hard limits of the vehicle model and the controller)."""
+
+    max_speed_mps: float = 0.8
+    max_reverse_mps: float = 0.0
+    max_accel_mps2: float = 1.5
+    max_turn_rate_radps: float = 3.0
+    max_turn_accel_radps2: float = 12.0
+
+    def validate(self, path: str) -> None:
+        for name in ("max_speed_mps", "max_accel_mps2", "max_turn_rate_radps",
+                     "max_turn_accel_radps2"):
+            positive(getattr(self, name), f"{path}.{name}")
+        if self.max_reverse_mps < 0:
+            raise ConfigError(f"{path}.max_reverse_mps: must be >= 0")
+
+
+@dataclass(frozen=True)
+class TrackingConfig:
+    """Gains of the unicycle trajectory-tracking controller (bridge.tracking)."""
+
+    k_along: float = 1.5
+    """1/s, gain on the along-track error."""
+    k_cross: float = 6.0
+    """1/m^2-ish, gain on the cross-track error (scaled by reference speed)."""
+    k_heading: float = 3.0
+    """1/s, gain on the heading error."""
+    goal_tolerance_m: float = 0.05
+    """A car is at its goal (and at any resting point of its plan) when it sees itself
+    this close; it then stops. The one goal tolerance of trustfg (Scenario.arrival_radius_m
+    derives the judge's from it)."""
+
+    def validate(self, path: str) -> None:
+        for name in ("k_along", "k_cross", "k_heading", "goal_tolerance_m"):
+            positive(getattr(self, name), f"{path}.{name}")
+
+
+@dataclass(frozen=True)
+class GuardConfig:
+    """The car process's last line of defence (bridge.guard): whatever the plan says, a car
+    never drives faster than it can stop before another car seen ahead of it, or a wall.
+    Off in the in-process experiments, which measure the planner's own factors."""
+
+    enabled: bool = True
+    stop_margin_m: float = 0.05
+    """How far beyond the breach distance (SafetyConfig) a car must have stopped, for pose
+    noise and latency (stopping right at the breach line breached it by 3 mm in a
+    partition run)."""
+    decel_mps2: float = 1.0
+    """Braking the guard counts on (below the vehicle's max_accel_mps2, for margin)."""
+    reaction_s: float = 0.1
+    """Pose age plus command latency the guard allows for before braking starts."""
+    cone_deg: float = 60.0
+    """Another car counts as ahead within this angle of the heading, either side."""
+    wall_clearance_m: float = 0.05
+    """Gap between the car's edge and a wall at which it must have stopped."""
+
+    def validate(self, path: str) -> None:
+        positive(self.decel_mps2, f"{path}.decel_mps2")
+        for name in ("stop_margin_m", "reaction_s", "wall_clearance_m"):
+            if getattr(self, name) < 0:
+                raise ConfigError(f"{path}.{name}: must be >= 0")
+        if not 0.0 < self.cone_deg <= 180.0:
+            raise ConfigError(f"{path}.cone_deg: must be within (0, 180]")
+
+
+@dataclass(frozen=True)
+class ControlConfig:
+    """The rhythm of a car: how often it commands, replans, reports (both simulations and
+    the lab)."""
+
+    command_rate_hz: float = 50.0
+    replan_period_s: float = 0.2
+    trust_report_period_s: float = 0.5
+    pose_period_s: float = 0.05
+    """How often a car publishes its own pose on the bus."""
+    status_period_s: float = 0.5
+    pose_timeout_s: float = 0.2
+    """A car whose own pose is older than this is commanded to stop."""
+    start_timeout_s: float = 0.0
+    """Drive without a start message after this long (0: wait for one forever)."""
+
+    def validate(self, path: str) -> None:
+        for name in ("command_rate_hz", "replan_period_s", "trust_report_period_s", "pose_period_s",
+                     "status_period_s", "pose_timeout_s"):
+            positive(getattr(self, name), f"{path}.{name}")
+        if self.start_timeout_s < 0:
+            raise ConfigError(f"{path}.start_timeout_s: must be >= 0")
+
+
+@dataclass(frozen=True)
+class BusConfig:
+    """How a process joins the fleet's Zenoh network (docs/architecture.md, "The bus").
+
+    Simulation and tests: explicit TCP endpoints on 127.0.0.1 and multicast scouting off.
+    Lab: multicast scouting on the Wi-Fi interface, listed endpoints, or a router
+    (``mode = "client"`` with ``connect`` naming it). ``zenoh_config`` names a JSON5 file
+    (deploy/zenoh/) used as the base -- TLS, access control -- that the fields here
+    complete.
+    """
+
+    mode: str = "peer"
+    listen: tuple[str, ...] = ()
+    connect: tuple[str, ...] = ()
+    multicast_scouting: bool = False
+    multicast_interface: str = ""
+    zenoh_config: str = ""
+    queue_size: int = 4096
+    """Received samples waiting for the agent; beyond this the oldest are dropped (counted)."""
+
+    def validate(self, path: str) -> None:
+        if self.mode not in ("peer", "client"):
+            raise ConfigError(f"{path}.mode: expected 'peer' or 'client', got {self.mode!r}")
+        for name in ("listen", "connect"):
+            for i, endpoint in enumerate(getattr(self, name)):
+                if "/" not in endpoint:
+                    raise ConfigError(f"{path}.{name}[{i}]: not a Zenoh endpoint (like tcp/10.0.0.2:7447): {endpoint!r}")
+        if self.queue_size < 16:
+            raise ConfigError(f"{path}.queue_size: must be >= 16")
+
+
+@dataclass(frozen=True)
+class NatNetConfig:
+    """Where the poses come from: OptiTrack Motive (or mocap_sim) over NatNet."""
+
+    server: str = "127.0.0.1"
+    """Address of the Motive host (its command port answers the handshake)."""
+    mode: str = "multicast"
+    """'multicast' (Motive's default) or 'unicast'."""
+    multicast_group: str = "239.255.42.99"
+    command_port: int = 1510
+    data_port: int = 1511
+    local_interface: str = "0.0.0.0"
+    """Local address to bind and to join the multicast group on."""
+    version: str = ""
+    """NatNet version of the stream when no SERVERINFO is heard (e.g. "3.1"; the bridge's
+    codec says which it decodes); empty: learn it from the handshake."""
+    up_axis: str = "y"
+    """Motive's up axis: 'y' (default; ground plane = (x, -z)) or 'z'."""
+
+    def validate(self, path: str) -> None:
+        if self.mode not in ("multicast", "unicast"):
+            raise ConfigError(f"{path}.mode: expected 'multicast' or 'unicast'")
+        if self.up_axis not in ("y", "z"):
+            raise ConfigError(f"{path}.up_axis: expected 'y' or 'z'")
+        if self.version and not re.fullmatch(r"\d{1,3}\.\d{1,3}", self.version):
+            raise ConfigError(f"{path}.version: expected MAJOR.MINOR like \"3.1\", got {self.version!r}")
+        for name in ("command_port", "data_port"):
+            if not 0 <= getattr(self, name) <= 65535:
+                raise ConfigError(f"{path}.{name}: not a port number")

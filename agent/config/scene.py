@@ -1,0 +1,166 @@
+"""The scene: the map, the cars on it, and the distances that keep them apart."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from .checks import ConfigError, parse_udp_address, positive
+
+
+@dataclass(frozen=True)
+class Obstacle:
+    """An axis-aligned rectangle (``kind = "rect"``, corners ``min``/``max``) or a polygon
+    (``kind = "polygon"``, ``points`` counter-clockwise or clockwise), in metres."""
+
+    kind: str = "rect"
+    min: tuple[float, float] = (0.0, 0.0)
+    max: tuple[float, float] = (0.0, 0.0)
+    points: tuple[tuple[float, float], ...] = ()
+
+    def validate(self, path: str) -> None:
+        if self.kind == "rect":
+            if not (self.max[0] > self.min[0] and self.max[1] > self.min[1]):
+                raise ConfigError(f"{path}: rect needs max > min on both axes")
+        elif self.kind == "polygon":
+            if len(self.points) < 3:
+                raise ConfigError(f"{path}.points: a polygon needs at least 3 points")
+        else:
+            raise ConfigError(f"{path}.kind: expected 'rect' or 'polygon', got {self.kind!r}")
+
+
+@dataclass(frozen=True)
+class WorldConfig:
+    """The map: a rectangle of free space bounded by walls, with obstacles inside."""
+
+    bounds_m: tuple[float, float, float, float] = (-2.5, -2.5, 2.5, 2.5)
+    """x_min, y_min, x_max, y_max of the arena; outside counts as obstacle."""
+    resolution_m: float = 0.01
+    """Cell size of the signed distance field."""
+    obstacles: tuple[Obstacle, ...] = ()
+
+    def validate(self, path: str) -> None:
+        x0, y0, x1, y1 = self.bounds_m
+        if not (x1 > x0 and y1 > y0):
+            raise ConfigError(f"{path}.bounds_m: need x_max > x_min and y_max > y_min")
+        positive(self.resolution_m, f"{path}.resolution_m")
+        for i, obstacle in enumerate(self.obstacles):
+            obstacle.validate(f"{path}.obstacles[{i}]")
+
+
+@dataclass(frozen=True)
+class CarConfig:
+    """One car of the fleet: where it starts, where it goes and how it may misbehave."""
+
+    id: int
+    start: tuple[float, float]
+    goal: tuple[float, float]
+    route: tuple[tuple[float, float], ...] = ()
+    """Optional via points between start and goal (lane centre lines). They only seed the
+    first plan and estimate the path length; the optimiser is free to leave them."""
+    start_heading_rad: float | None = None
+    """Heading at the start; default: towards the first via point (or the goal)."""
+    radius_m: float = 0.1
+    color: str = ""
+    misinformation: float = 0.0
+    """Fraction of this car's plan messages that are falsified (see agent.misbehaviour)."""
+    false_testimony: bool = False
+    """If true, this car's trust reports lie: they swap success and failure evidence
+    about every peer (see agent.misbehaviour)."""
+    rigid_body: int = 0
+    """Its NatNet rigid-body id in Motive; 0 means the same as ``id``."""
+    link: str = ""
+    """Where its velocity commands go, ``udp://HOST:PORT`` (the car, or mocap_sim)."""
+    listen: tuple[str, ...] = ()
+    """Zenoh endpoints this car's process listens on, e.g. ``tcp/10.0.0.11:7447``
+    (added to ``bus.listen``)."""
+
+    @property
+    def body_id(self) -> int:
+        return self.rigid_body or self.id
+
+    @property
+    def start_heading(self) -> float:
+        """Heading at the start: ``start_heading_rad``, else towards the first via point
+        (or the goal)."""
+        if self.start_heading_rad is not None:
+            return self.start_heading_rad
+        target = self.route[0] if self.route else self.goal
+        return math.atan2(target[1] - self.start[1], target[0] - self.start[0])
+
+    def validate(self, path: str) -> None:
+        if not 1 <= self.id <= 255:
+            raise ConfigError(f"{path}.id: must be within 1..255, got {self.id}")
+        if self.rigid_body < 0:
+            raise ConfigError(f"{path}.rigid_body: must be >= 0")
+        if self.link:
+            parse_udp_address(self.link, f"{path}.link")
+        positive(self.radius_m, f"{path}.radius_m")
+        if not 0.0 <= self.misinformation <= 1.0:
+            raise ConfigError(f"{path}.misinformation: must be within [0, 1]")
+
+
+@dataclass(frozen=True)
+class SafetyConfig:
+    """The distances that keep cars apart, all derived from the cars' radii and one
+    required clearance (every component reads them from here):
+
+        breach distance   d_ab     = r_a + r_b + clearance_m           (centres; closer is a breach)
+        planner           eps_0,ab = d_ab + peer_margin_m              (proximity hinge, trusted peer)
+        planner, walls    eps_obs  = r + clearance_m + obstacle_margin_m  (centre to surface)
+        guard             d_stop   = d_ab + guard.stop_margin_m        (must have stopped by then)
+
+    With the default 0.1 m radii: d_ab = 0.3 m, eps_0 = 0.45 m, eps_obs = 0.25 m, d_stop = 0.35 m.
+    """
+
+    clearance_m: float = 0.1
+    """Required gap between two cars' edges; less is a breach (metrics, trust's safety
+    evidence, the dashboard's alerts)."""
+    peer_margin_m: float = 0.15
+    """What a plan keeps beyond the breach distance from a fully trusted peer's plan:
+    room for tracking error and the peer's plan changing before we hear of it."""
+    obstacle_margin_m: float = 0.05
+    """What a plan keeps beyond the clearance from walls and obstacles."""
+
+    def validate(self, path: str) -> None:
+        positive(self.clearance_m, f"{path}.clearance_m")
+        for name in ("peer_margin_m", "obstacle_margin_m"):
+            if getattr(self, name) < 0:
+                raise ConfigError(f"{path}.{name}: must be >= 0")
+
+    def breach_distance(self, radius_a: float, radius_b: float) -> float:
+        """Centre distance below which two cars breach the clearance."""
+        return radius_a + radius_b + self.clearance_m
+
+    def epsilon_0(self, radius_a: float, radius_b: float) -> float:
+        """eps_0: the proximity hinge's threshold for a fully trusted peer (centres)."""
+        return (radius_a + radius_b) + (self.clearance_m + self.peer_margin_m)
+
+    def epsilon_obstacle(self, radius: float) -> float:
+        """The obstacle hinge's threshold, centre to surface."""
+        return radius + (self.clearance_m + self.obstacle_margin_m)
+
+
+@dataclass(frozen=True)
+class SimConfig:
+    """Both simulations: the in-process fleet (fleet.fleet_sim, which steps physics and
+    control at ``control.command_rate_hz``) and the departures ``trustfg sim`` draws."""
+
+    observation_noise_m: float = 0.002
+    message_latency_s: float = 0.02
+    timeout_s: float = 45.0
+    start_delay_max_s: float = 2.0
+    """Each car waits U(0, this) before it moves: desynchronised starts per seed. On the
+    intersection's right-hand lanes two crossing cars that start together reach their
+    crossing 0.8 m (about 2 s) apart, so real conflicts need offsets of that size: with
+    2 s, 30 of 40 seeds breach with avoidance off."""
+    cruise_speed_range_mps: tuple[float, float] = (0.35, 0.45)
+    """Each car's cruise speed is drawn from this range per seed."""
+
+    def validate(self, path: str) -> None:
+        positive(self.timeout_s, f"{path}.timeout_s")
+        if self.observation_noise_m < 0 or self.message_latency_s < 0 or self.start_delay_max_s < 0:
+            raise ConfigError(f"{path}: noise, latency and delay must be >= 0")
+        lo, hi = self.cruise_speed_range_mps
+        if not 0 < lo <= hi:
+            raise ConfigError(f"{path}.cruise_speed_range_mps: need 0 < low <= high")
