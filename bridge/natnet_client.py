@@ -2,10 +2,11 @@
 
 Two pieces, as everywhere in trustfg:
 
-* :class:`FrameReceiver` is the logic and opens nothing: datagrams in (``handle``), frames
-  out. It decodes, counts (received, decoded, rejected by reason, frames dropped by gaps in
-  frame numbers, stale/out-of-order), keeps a latest-value slot per rigid body id and calls
-  an optional ``on_frame`` callback. Tests drive it with captured bytes.
+* :class:`FrameReceiver` (in :mod:`bridge.natnet_receiver`, re-exported here) is the logic
+  and opens nothing: datagrams in (``handle``), frames out. It decodes, counts (received,
+  decoded, rejected by reason, frames dropped by gaps in frame numbers, stale/out-of-order),
+  keeps a latest-value slot per rigid body id and calls an optional ``on_frame`` callback.
+  Tests drive it with captured bytes.
 * :class:`NatNetClient` is the thin I/O layer, a context manager.
 
 Modes (``NatNetClientOptions.multicast``):
@@ -44,10 +45,8 @@ import socket
 import sys
 import threading
 import time
-from collections import Counter
-from dataclasses import dataclass, field
-from types import MappingProxyType
-from typing import Callable, Mapping
+from dataclasses import dataclass
+from typing import Callable
 
 from trustfg.agent.config import NatNetConfig
 from trustfg.bridge import natnet
@@ -56,11 +55,11 @@ from trustfg.bridge.natnet import (
     Frame,
     MessageId,
     NatNetError,
-    RigidBody,
     ServerInfo,
     Version,
     supports_frames,
 )
+from trustfg.bridge.natnet_receiver import BodySample, FrameReceiver, NatNetStats
 
 __all__ = ["NatNetClientOptions", "NatNetClient", "NatNetConnectionError", "FrameReceiver",
            "BodySample", "NatNetStats"]
@@ -113,142 +112,6 @@ class NatNetClientOptions:
                      "reconnect_after_s", "poll_timeout_s", "close_timeout_s"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be > 0")
-
-
-@dataclass(frozen=True)
-class BodySample:
-    """The latest report of one rigid body. ``received_s`` is ``time.monotonic()``."""
-
-    body: RigidBody
-    frame_number: int
-    timestamp: float
-    received_s: float
-
-
-@dataclass(frozen=True)
-class NatNetStats:
-    received: int = 0  # datagrams
-    decoded: int = 0  # frames accepted
-    rejected: Mapping[str, int] = field(default_factory=dict)  # datagrams, by reason
-    dropped: int = 0  # frames missing from the sequence of frame numbers
-    other: int = 0  # non-frame messages (SERVERINFO, responses, ...)
-    callback_errors: int = 0
-    last_frame_number: int | None = None
-
-    @property
-    def rejected_total(self) -> int:
-        return sum(self.rejected.values())
-
-
-class FrameReceiver:
-    """Client logic: decode datagrams, count, keep the latest sample of each rigid body.
-
-    ``handle`` is called by one thread (the socket's); the readers (``latest``, ``stats``,
-    ``wait_for_frames``) may be called from any thread. A frame number lower than the last
-    one is rejected as ``stale``, unless it is more than ``restart_threshold`` lower: then
-    the server restarted and the sequence starts over.
-    """
-
-    def __init__(self, version: Version | None, on_frame: Callable[[Frame], None] | None = None,
-                 *, pinned: bool = False, restart_threshold: int = 600) -> None:
-        self._version = version
-        self._pinned = pinned
-        self._on_frame = on_frame
-        self._restart_threshold = restart_threshold
-        self._cond = threading.Condition()
-        self._latest: dict[int, BodySample] = {}
-        self._rejected: Counter[str] = Counter()
-        self._received = self._decoded = self._dropped = self._other = 0
-        self._callback_errors = 0
-        self._last_frame: int | None = None
-        self.server_info: ServerInfo | None = None
-
-    @property
-    def version(self) -> Version | None:
-        return self._version
-
-    def handle(self, packet: bytes, received_s: float) -> Frame | None:
-        """Process one datagram; returns the frame if it was accepted."""
-        with self._cond:
-            self._received += 1
-        try:
-            message_id, payload = natnet.unpack_header(packet)
-            if message_id != MessageId.FRAMEOFDATA:
-                self._handle_other(message_id, payload)
-                return None
-            if self._version is None:
-                raise NatNetError("frame before the NatNet version is known", "no_version")
-            frame = natnet.decode_frame(payload, self._version)
-        except NatNetError as exc:
-            self._reject(exc.reason, str(exc))
-            return None
-        if not self._accept(frame, received_s):
-            return None
-        if self._on_frame is not None:
-            try:
-                self._on_frame(frame)
-            except Exception:  # the callback is user code; the socket thread must go on
-                with self._cond:
-                    self._callback_errors += 1
-                log.exception("NatNet on_frame callback failed on frame %d", frame.frame_number)
-        return frame
-
-    def _handle_other(self, message_id: int, payload: memoryview) -> None:
-        with self._cond:
-            self._other += 1
-        if message_id == MessageId.SERVERINFO:
-            info = natnet.decode_server_info(payload)
-            self.server_info = info
-            if not self._pinned and info.natnet_version != self._version \
-                    and supports_frames(info.natnet_version):
-                log.warning("NatNet server now streams version %s (was %s)",
-                            info.natnet_version, self._version)
-                self._version = info.natnet_version
-
-    def _reject(self, reason: str, message: str) -> None:
-        with self._cond:
-            self._rejected[reason] += 1
-            first = self._rejected[reason] == 1
-        log.log(logging.WARNING if first else logging.DEBUG,
-                "NatNet datagram rejected (%s): %s", reason, message)
-
-    def _accept(self, frame: Frame, received_s: float) -> bool:
-        number = frame.frame_number
-        with self._cond:
-            last = self._last_frame
-            if last is not None:
-                if number <= last and last - number <= self._restart_threshold:
-                    self._rejected["stale"] += 1
-                    return False
-                if number > last + 1:
-                    self._dropped += number - last - 1
-                elif number <= last:
-                    log.info("NatNet frame numbers restarted (%d after %d)", number, last)
-            self._last_frame = number
-            self._decoded += 1
-            for body in frame.rigid_bodies:
-                self._latest[body.id] = BodySample(body, number, frame.timestamp, received_s)
-            self._cond.notify_all()
-        return True
-
-    def latest(self, body_id: int) -> BodySample | None:
-        with self._cond:
-            return self._latest.get(body_id)
-
-    def latest_all(self) -> dict[int, BodySample]:
-        with self._cond:
-            return dict(self._latest)
-
-    def stats(self) -> NatNetStats:
-        with self._cond:
-            return NatNetStats(self._received, self._decoded,
-                               MappingProxyType(dict(self._rejected)), self._dropped,
-                               self._other, self._callback_errors, self._last_frame)
-
-    def wait_for_frames(self, count: int, timeout_s: float) -> bool:
-        """Block until ``count`` frames in total have been accepted, or the timeout passes."""
-        with self._cond:
-            return self._cond.wait_for(lambda: self._decoded >= count, timeout_s)
 
 
 def _reuse(sock: socket.socket) -> None:

@@ -1,4 +1,5 @@
-"""NatNet test helpers: the real Motive captures and a minimal pcapng reader.
+"""NatNet test helpers: the real Motive captures, a minimal pcapng reader, and the small
+assertion helpers the codec's test modules share.
 
 The captures are test data in ``tests/data/natnet-captures`` (copied from the project's
 shared captures with their licences and SHA256SUMS); a missing file is an error, never
@@ -13,9 +14,25 @@ from typing import Callable, NamedTuple
 
 import pytest
 
+from trustfg.bridge import natnet as nn
+from trustfg.bridge.natnet import V3_0, NatNetError, Version
+
 CAPTURES = Path(__file__).resolve().parent.parent / "data" / "natnet-captures"
 V3_DIR = "natnet3_motive2.1_python_natnet"
 V2_DIR = "natnet2x_motive1.x_natnet-decode"
+V3_FRAME = "mocapframe_packet_v3.bin"
+
+
+def approx(values, rel=0, abs=5e-7):
+    return pytest.approx(tuple(values), rel=rel, abs=abs)
+
+
+def reason_of(packet: bytes, version: Version = V3_0, **kw) -> str:
+    """The ``reason`` of the NatNetError that decoding ``packet`` must raise."""
+    with pytest.raises(NatNetError) as info:
+        nn.deserialize(packet, version, **kw)
+    assert str(info.value)
+    return info.value.reason
 
 
 class UdpDatagram(NamedTuple):

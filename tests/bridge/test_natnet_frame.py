@@ -1,8 +1,8 @@
-"""The NatNet codec against real Motive captures, golden bytes and the SDK layouts."""
+"""FRAMEOFDATA against real Motive captures (3.0 and 2.x), the SDK sample client's log,
+golden bytes, round trips of every section in 3.0-4.1, and rejected frames."""
 
 from __future__ import annotations
 
-import hashlib
 import math
 import re
 import struct
@@ -10,26 +10,16 @@ from decimal import ROUND_HALF_UP, Decimal
 
 import pytest
 
+from tests.bridge.conftest import V3_FRAME, approx, reason_of
 from trustfg.bridge import natnet as nn
-from trustfg.bridge.natnet import V3_0, V3_1, V4_0, V4_1, Frame, MessageId, NatNetError, RigidBody, Version
+from trustfg.bridge.natnet import V3_0, V3_1, V4_0, V4_1, Frame, NatNetError, RigidBody, Version
 
-V3_FRAME = "mocapframe_packet_v3.bin"
 CLOCK_HZ = 3312787  # from the SERVERINFO of the same session
-
-
-def approx(values, rel=0, abs=5e-7):
-    return pytest.approx(tuple(values), rel=rel, abs=abs)
 
 
 # ---------------------------------------------------------------------------------------
 # Captures: the values the captures README lists
 # ---------------------------------------------------------------------------------------
-
-
-def test_capture_files_match_their_checksums(captures):
-    for line in (captures / "SHA256SUMS").read_text().splitlines():
-        digest, name = line.split(maxsplit=1)
-        assert hashlib.sha256((captures / name).read_bytes()).hexdigest() == digest, name
 
 
 def test_motive_3_0_frame_decodes_to_the_documented_values(capture):
@@ -73,80 +63,9 @@ def test_last_frame_of_the_session(capture):
     assert frame.rigid_bodies[0].position == approx((0.17444, 1.44713, -0.73431), abs=5e-6)
 
 
-def test_server_info_capture(capture):
-    info = nn.deserialize(capture("serverinfo_packet_v3.bin"), V3_0)
-    assert info == nn.ServerInfo("Motive", Version(2, 1, 0, 0), Version(3, 0, 0, 0),
-                                 nn.ConnectionInfo(3312787, 1511, True, "239.255.42.99"))
-
-
-def test_server_info_reencodes_except_the_garbage_after_the_name(capture):
-    packet = capture("serverinfo_packet_v3.bin")
-    again = nn.serialize(nn.deserialize(packet, V3_0))
-    assert len(again) == len(packet) == 4 + 279
-    assert again[:4 + 7] == packet[:4 + 7]  # header and "Motive\0"
-    assert again[4 + 256:] == packet[4 + 256:]
-    assert packet[4 + 7:4 + 256] != bytes(249)  # Motive really sends garbage there
-
-
-def test_model_def_capture_and_golden_bytes(capture):
-    packet = capture("modeldef_packet_v3.bin")
-    model = nn.deserialize(packet, V3_0)
-    (quad,) = model.rigid_bodies
-    assert (quad.name, quad.id, quad.parent_id, quad.offset) == ("RaceQuad", 2, -1, (0, 0, 0))
-    assert len(quad.markers) == 5
-    assert quad.markers[0].offset == approx((0.161159, 0.0350516, -0.0321813), abs=5e-7)
-    assert [m.name for m in quad.markers] == [""] * 5  # names are on the wire from 4.0
-    assert [s.name for s in model.marker_sets] == ["RaceQuad", "all"]
-    assert model.marker_sets[0].marker_names == tuple(f"Marker{i}" for i in range(1, 6))
-    assert model.marker_sets[1].marker_names == tuple(f"RaceQuad_{i}" for i in range(1, 6))
-    assert nn.serialize(model, V3_0) == packet
-
-
-@pytest.mark.parametrize("name, cls", [("connect_packet_v3.bin", nn.ConnectRequest),
-                                       ("discovery_packet_v3.bin", nn.DiscoveryRequest)])
-def test_natnetlib_connect_and_discovery(capture, name, cls):
-    packet = capture(name)
-    request = nn.deserialize(packet, V3_0)
-    assert type(request) is cls
-    assert request == cls("NatNetLib", Version(3, 0, 0, 0), Version(3, 0, 0, 0))
-    assert len(packet) == 4 + 264 and nn.serialize(request) == packet
-
-
-def test_echo_request_and_response(capture):
-    request = nn.deserialize(capture("echorequest_packet_v3.bin"), V3_0)
-    response = nn.deserialize(capture("echoresponse_packet_v3.bin"), V3_0)
-    assert request == nn.EchoRequest(278554190)
-    assert response.request_timestamp == 278554190
-    assert nn.serialize(request) == capture("echorequest_packet_v3.bin")
-    assert nn.serialize(response) == capture("echoresponse_packet_v3.bin")
-
-
-def test_requests_responses_and_unrecognized_request(capture):
-    assert nn.deserialize(capture("requestmodeldef_packet_v3.bin"), V3_0) == nn.RequestModelDef()
-    assert nn.deserialize(capture("request_FrameRate_v3.bin"), V3_0) == nn.Request("FrameRate")
-    assert nn.serialize(nn.Request("FrameRate")) == capture("request_FrameRate_v3.bin")
-    rate = nn.deserialize(capture("response_FrameRate_120Hz_v3.bin"), V3_0)
-    assert rate.as_float() == 120.0
-    assert nn.deserialize(capture("response_AnalogSamplesPerMocapFrame_v3.bin"), V3_0).as_int() == 0
-    unrecognized_packet = capture("unrecognized_request_id100_v3.bin")
-    assert unrecognized_packet[:2] == b"\x64\x00"  # 100 decimal on the wire
-    unrecognized = nn.deserialize(unrecognized_packet, V3_0)
-    assert unrecognized == nn.UnrecognizedRequest("NatNetLib", Version(3), Version(3))
-
-
 # ---------------------------------------------------------------------------------------
 # The whole recorded session
 # ---------------------------------------------------------------------------------------
-
-
-def test_every_datagram_of_the_session_decodes(traffic):
-    assert len(traffic) == 550
-    kinds = [type(nn.deserialize(d.payload, V3_0)).__name__ for d in traffic]
-    assert kinds.count("Frame") == 518
-    for name in ("DiscoveryRequest", "ConnectRequest", "ServerInfo", "Request", "Response",
-                 "EchoRequest", "EchoResponse", "RequestModelDef", "ModelDef",
-                 "UnrecognizedRequest"):
-        assert name in kinds
 
 
 def test_all_518_frames_are_consecutive_and_reencode_exactly(traffic):
@@ -241,6 +160,7 @@ def test_whole_v3_packets_reencode_exactly(capture):
 # ---------------------------------------------------------------------------------------
 # NatNet 2.x (Motive 1.x) captures
 # ---------------------------------------------------------------------------------------
+
 
 V2_CASES = [
     (nn.V2_5, "1.5.0", (92881, 92882), "Rigid Body 1", 1, (-0.26316, 0.03913, 1.12352), 2),
@@ -353,39 +273,25 @@ def test_frame_without_the_end_of_data_tag_is_accepted():
 # ---------------------------------------------------------------------------------------
 
 
-def _reason(packet: bytes, version: Version = V3_0, **kw) -> str:
-    with pytest.raises(NatNetError) as info:
-        nn.deserialize(packet, version, **kw)
-    assert str(info.value)
-    return info.value.reason
-
-
-def test_header_errors():
-    assert _reason(b"\x07") == "truncated"
-    assert _reason(b"\x07\x00\x10\x00" + bytes(8)) == "size_mismatch"
-    assert _reason(nn.pack_header(55, b"")) == "unknown_message"
-    assert issubclass(NatNetError, ValueError)
-
-
 def test_huge_and_negative_counts_are_rejected_before_allocating():
     simple = nn.encode_frame(Frame(1, (RigidBody(1, (0, 0, 0), (0, 0, 0, 1)),), 0.0), V3_0)
     for count in (0x7FFFFFFF, 3, -1):
         bad = simple[:12] + struct.pack("<i", count) + simple[16:]
-        assert _reason(nn.pack_header(7, bad)) == "bad_count"
+        assert reason_of(nn.pack_header(7, bad)) == "bad_count"
     bad_sets = struct.pack("<ii", 1, 0x7FFFFFFF) + simple[8:]
-    assert _reason(nn.pack_header(7, bad_sets)) == "bad_count"
+    assert reason_of(nn.pack_header(7, bad_sets)) == "bad_count"
 
 
 def test_section_size_that_disagrees_is_rejected():
     payload = bytearray(nn.encode_frame(rich_frame(V4_1), V4_1))
     (n_sets, size) = struct.unpack_from("<ii", payload, 4)
     struct.pack_into("<i", payload, 8, size + 1)
-    assert _reason(nn.pack_header(7, bytes(payload)), V4_1) in ("section_size", "bad_count",
+    assert reason_of(nn.pack_header(7, bytes(payload)), V4_1) in ("section_size", "bad_count",
                                                                 "truncated")
     payload = bytearray(nn.encode_frame(rich_frame(V4_1), V4_1))
     off = 8 + 4 + size  # legacy marker count
     struct.pack_into("<i", payload, off + 4, 11)  # one legacy marker is 12 bytes
-    assert _reason(nn.pack_header(7, bytes(payload)), V4_1) == "section_size"
+    assert reason_of(nn.pack_header(7, bytes(payload)), V4_1) == "section_size"
 
 
 def test_non_finite_values_where_they_matter():
@@ -393,8 +299,8 @@ def test_non_finite_values_where_they_matter():
     for bad in (RigidBody(1, (math.nan, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0)),
                 RigidBody(1, (0.0, 0.0, 0.0), (0.0, math.inf, 0.0, 1.0)),
                 RigidBody(1, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0), -math.inf)):
-        assert _reason(nn.serialize(Frame(1, (good, bad), 0.0), V3_0)) == "non_finite"
-    assert _reason(nn.serialize(Frame(1, (good,), math.nan), V3_0)) == "non_finite"
+        assert reason_of(nn.serialize(Frame(1, (good, bad), 0.0), V3_0)) == "non_finite"
+    assert reason_of(nn.serialize(Frame(1, (good,), math.nan), V3_0)) == "non_finite"
     # an untracked body's pose does not matter: accepted as sent
     lost = RigidBody(2, (math.nan, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0), 0.0, False)
     frame = nn.deserialize(nn.serialize(Frame(1, (good, lost), 0.0), V3_0), V3_0)
@@ -403,21 +309,13 @@ def test_non_finite_values_where_they_matter():
 
 def test_trailing_bytes_and_unsupported_versions():
     packet = nn.serialize(Frame(1, (), 0.0), V3_0)
-    assert _reason(nn.pack_header(7, packet[4:] + b"\0\0")) == "trailing_bytes"
+    assert reason_of(nn.pack_header(7, packet[4:] + b"\0\0")) == "trailing_bytes"
     for version in (Version(4, 2), Version(1, 0), Version(5, 0)):
-        assert _reason(packet, version) == "unsupported_version"
+        assert reason_of(packet, version) == "unsupported_version"
         assert not nn.supports_frames(version)
         with pytest.raises(NatNetError):
             nn.encode_frame(Frame(1), version)
     assert all(nn.supports_frames(v) for v in nn.FRAME_VERSIONS + (nn.V2_5, nn.V2_9))
-
-
-def test_fixed_size_messages_reject_wrong_sizes():
-    assert _reason(nn.pack_header(MessageId.ECHO_REQUEST, bytes(7))) == "truncated"
-    assert _reason(nn.pack_header(MessageId.ECHO_RESPONSE, bytes(17))) == "trailing_bytes"
-    assert _reason(nn.pack_header(MessageId.SERVERINFO, bytes(270))) == "truncated"
-    with pytest.raises(NatNetError):
-        nn.Response(b"\0\0").as_float()
 
 
 def test_encoder_errors_are_natnet_errors():
@@ -429,181 +327,3 @@ def test_encoder_errors_are_natnet_errors():
         nn.encode_frame(rich_frame(V4_1), V4_0)  # assets need 4.1
     with pytest.raises(NatNetError):
         nn.pack_header(7, bytes(70000))
-
-
-# ---------------------------------------------------------------------------------------
-# CONNECT variants, SERVERINFO, simple messages
-# ---------------------------------------------------------------------------------------
-
-
-def python_sample_connect(version: Version) -> bytes:
-    """What the official SDK Python sample sends: 270 bytes, "Ping", version at 265, + NUL."""
-    body = bytearray(270)
-    body[0:4] = b"Ping"
-    body[265:269] = version.to_bytes()
-    return nn.pack_header(MessageId.CONNECT, bytes(body) + b"\0")
-
-
-def test_every_connect_variant_decodes(capture):
-    assert nn.deserialize(nn.pack_header(0, b""), V3_0) == nn.ConnectRequest()
-    assert nn.deserialize(nn.pack_header(0, b"Ping\0"), V3_0) == nn.ConnectRequest("Ping")
-    natnetlib = nn.deserialize(capture("connect_packet_v3.bin"), V3_0)
-    assert natnetlib.stream_version == Version(3, 0)
-    sample = nn.deserialize(python_sample_connect(Version(4, 2)), V3_0)
-    assert len(python_sample_connect(Version(4, 2))) == 4 + 271
-    assert sample == nn.ConnectRequest("Ping", requested_version=Version(4, 2))
-    assert sample.stream_version == Version(4, 2)
-
-
-@pytest.mark.parametrize("request_", [
-    nn.ConnectRequest(), nn.ConnectRequest("Ping"),
-    nn.ConnectRequest("trustfg", Version(0, 1), V4_1),
-    nn.ConnectRequest("trustfg", Version(0, 1), V4_1, True, V3_1),
-    nn.DiscoveryRequest("NatNetLib", Version(3), Version(3)),
-])
-def test_connect_round_trips(request_):
-    assert nn.deserialize(nn.serialize(request_), V3_0) == request_
-
-
-@pytest.mark.parametrize("message", [
-    nn.KeepAlive(), nn.Disconnect(), nn.RequestModelDef(), nn.RequestFrame(),
-    nn.Request("FrameRate"), nn.Response(b"\x01\x02\x03\x04"), nn.MessageString("hello"),
-    nn.EchoRequest(2 ** 63), nn.EchoResponse(1, 2), nn.UnrecognizedRequest(),
-    nn.UnrecognizedRequest("mocap_sim", Version(0, 1), V4_1),
-    nn.ServerInfo("mocap_sim", Version(0, 1, 2, 3), V4_1,
-                  nn.ConnectionInfo(10_000_000, 1511, False, "239.255.42.99")),
-    nn.ServerInfo("old", Version(1, 5), Version(2, 5), None),
-])
-def test_simple_messages_round_trip(message):
-    assert nn.deserialize(nn.serialize(message), V4_1) == message
-
-
-def test_empty_messages_tolerate_the_python_sample_trailing_nul():
-    # the SDK Python sample sends KEEPALIVE and REQUEST_MODELDEF with a 1-byte payload "\0"
-    assert nn.deserialize(nn.pack_header(MessageId.KEEPALIVE, b"\0"), V3_0) == nn.KeepAlive()
-    assert nn.deserialize(nn.pack_header(MessageId.REQUEST_MODELDEF, b"\0"), V3_0) == \
-        nn.RequestModelDef()
-
-
-def test_message_ids_are_the_sdk_numbers():
-    assert [int(m) for m in MessageId] == [0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 12, 13, 14, 100]
-    assert nn.peek_message_id(b"\x07\x00") == 7 and nn.peek_message_id(b"\x07") is None
-
-
-def test_version_parse_and_order():
-    assert Version.parse("4.1") == Version(4, 1, 0, 0) == V4_1
-    assert str(Version.parse("3.0.0.0")) == "3.0.0.0"
-    assert nn.V2_9 < V3_0 < V3_1 < V4_0 < V4_1
-    for bad in ("", "4.x", "256.0", "1.2.3.4.5"):
-        with pytest.raises(ValueError):
-            Version.parse(bad)
-
-
-# ---------------------------------------------------------------------------------------
-# MODELDEF
-# ---------------------------------------------------------------------------------------
-
-
-def model(names: bool) -> nn.ModelDef:
-    markers = tuple(nn.RigidBodyMarker((0.125 * i, -0.25, 0.5), i, f"M{i}" if names else "")
-                    for i in range(3))
-    return nn.ModelDef((nn.MarkerSetDescription("car1", ("M0", "M1", "M2")),
-                        nn.RigidBodyDescription("car1", 1, -1, (0.0, 0.5, 0.0), markers),
-                        nn.RigidBodyDescription("car2", 2),
-                        nn.MarkerSetDescription("all")))
-
-
-@pytest.mark.parametrize("version, names", [(V3_0, False), (V3_1, False), (V4_0, True),
-                                            (V4_1, True)])
-def test_model_def_round_trips(version, names):
-    m = model(names)
-    assert nn.deserialize(nn.serialize(m, version), version) == m
-
-
-def test_model_def_4_1_sizes_and_other_kinds_are_walked():
-    # NatNet 4.1: kind, byte size, description; unknown kinds are skipped by their size
-    camera = b"cam1\0" + struct.pack("<3f4f", 1, 2, 3, 0, 0, 0, 1)
-    skeleton = (b"skel\0" + struct.pack("<ii", 4, 1) + b"bone\0"
-                + struct.pack("<ii3fi", 65537, -1, 0, 0, 0, 0))
-    asset = (b"asset\0" + struct.pack("<iii", 1, 6, 1) + b"rb\0"
-             + struct.pack("<ii3fi", 7, -1, 0, 0, 0, 0) + struct.pack("<i", 1) + b"m1\0"
-             + struct.pack("<i3ffh", 3, 0, 0, 0, 0.02, 0))
-    device = struct.pack("<i", 3) + b"dev\0" + b"SN1\0" + struct.pack("<iii", 1, 2, 1) + b"ch0\0"
-    plate = (struct.pack("<i", 2) + b"FP\0" + struct.pack("<2f3f", 1, 1, 0, 0, 0)
-             + bytes(144 * 4 + 12 * 4) + struct.pack("<iii", 1, 1, 2) + b"Fx\0Fy\0")
-    parts = [(5, camera), (2, skeleton), (6, asset), (4, device), (3, plate), (99, b"future")]
-    payload = struct.pack("<i", len(parts)) + b"".join(struct.pack("<ii", k, len(b)) + b
-                                                       for k, b in parts)
-    decoded = nn.decode_model_def(payload, V4_1)
-    assert [(d.kind, d.name) for d in decoded.descriptions] == [
-        (5, "cam1"), (2, "skel"), (6, "asset"), (4, "dev"), (3, "FP"), (99, "")]
-    # the same without the sizes (4.0), minus the unknown kind
-    payload40 = struct.pack("<i", 5) + b"".join(struct.pack("<i", k) + b for k, b in parts[:5])
-    assert len(nn.decode_model_def(payload40, V4_0).descriptions) == 5
-    with pytest.raises(NatNetError):
-        nn.decode_model_def(struct.pack("<i", 1) + struct.pack("<i", 99) + b"future", V4_0)
-    bad_size = bytearray(payload)
-    struct.pack_into("<i", bad_size, 8, len(camera) + 1)
-    with pytest.raises(NatNetError):
-        nn.decode_model_def(bytes(bad_size), V4_1)
-
-
-# ---------------------------------------------------------------------------------------
-# Ground plane
-# ---------------------------------------------------------------------------------------
-
-
-def about(axis: str, angle: float) -> tuple[float, float, float, float]:
-    s, c = math.sin(angle / 2), math.cos(angle / 2)
-    return {"x": (s, 0.0, 0.0, c), "y": (0.0, s, 0.0, c), "z": (0.0, 0.0, s, c)}[axis]
-
-
-def quat_mul(a, b):
-    ax, ay, az, aw = a
-    bx, by, bz, bw = b
-    return (aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz)
-
-
-@pytest.mark.parametrize("angle", [0.0, 0.3, math.pi / 2, 2.5, -1.0, -math.pi / 2])
-def test_yaw_of_known_rotations(angle):
-    # Y-up: +angle about Motive's +y (up) is counter-clockwise seen from above
-    x, y, yaw = nn.to_ground_plane((1.0, 0.2, 3.0), about("y", angle), "y")
-    assert (x, y) == (1.0, -3.0)
-    assert yaw == pytest.approx(angle, abs=1e-12)
-    x, y, yaw = nn.to_ground_plane((1.0, 2.0, 0.2), about("z", angle), "z")
-    assert (x, y) == (1.0, 2.0) and yaw == pytest.approx(angle, abs=1e-12)
-    # scale does not matter, and neither does a roll about the body's own x axis
-    q = tuple(2.0 * v for v in quat_mul(about("y", angle), about("x", 0.4)))
-    assert nn.to_ground_plane((0, 0, 0), q, "y")[2] == pytest.approx(angle, abs=1e-12)
-
-
-def test_yaw_sign_matches_the_ground_frame_by_construction():
-    # Y-up: a body whose x axis points along Motive -z points along ground +y: yaw +90 deg.
-    # That is a rotation of +90 deg about +y: x -> (cos, 0, -sin) = -z.
-    assert nn.to_ground_plane((0, 0, 0), about("y", math.pi / 2))[2] == \
-        pytest.approx(math.pi / 2)
-    # Motive +x stays ground +x, Motive -z becomes ground +y (right-handed, z up)
-    assert nn.to_ground_plane((0.0, 5.0, -2.0), (0, 0, 0, 1))[:2] == (0.0, 2.0)
-    with pytest.raises(ValueError):
-        nn.to_ground_plane((0, 0, 0), (0, 0, 0, 1), "x")
-
-
-def test_yaw_of_the_captured_quad(capture):
-    body = nn.deserialize(capture(V3_FRAME), V3_0).rigid_bodies[0]
-    x, y, yaw = nn.to_ground_plane(body.position, body.orientation, "y")
-    assert (x, y) == pytest.approx((0.1744466, 0.7343040), abs=1e-6)
-    # q is nearly a rotation about +y (qy = 0.51, qw = -0.857): angle = 2 atan2(qy, qw)
-    qx, qy, qz, qw = body.orientation
-    expected = math.atan2(math.sin(2 * math.atan2(qy, qw)), math.cos(2 * math.atan2(qy, qw)))
-    assert yaw == pytest.approx(expected, abs=0.15)
-
-
-@pytest.mark.parametrize("up", ["y", "z"])
-def test_ground_plane_mapping_round_trips(up):
-    import math
-    for x, y, yaw in [(0.4, -2.15, 1.57), (-1.0, 0.3, -3.0), (2.0, 2.0, 0.0), (0.0, 0.0, 3.1)]:
-        position, orientation = nn.from_ground_plane(x, y, yaw, 0.05, up)
-        gx, gy, gyaw = nn.to_ground_plane(position, orientation, up)
-        assert (gx, gy) == pytest.approx((x, y))
-        assert math.isclose(math.remainder(gyaw - yaw, 2 * math.pi), 0.0, abs_tol=1e-9)
