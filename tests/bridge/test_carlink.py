@@ -9,7 +9,6 @@ import zlib
 
 import pytest
 
-from trustfg.bridge import carlink
 from trustfg.bridge.carlink import (
     DATAGRAM_SIZE,
     CarLinkError,
@@ -18,6 +17,7 @@ from trustfg.bridge.carlink import (
     CommandReceiver,
     CommandSender,
     Flags,
+    codec,
     decode_command,
     encode_command,
     next_slot,
@@ -55,7 +55,7 @@ def test_golden_bytes():
 
 
 def test_worked_example_in_docstring_is_the_golden_datagram():
-    doc = carlink.__doc__
+    doc = codec.__doc__
     example = doc[doc.index("Worked example"):]
     hex_lines = re.findall(r"^ {4}((?:[0-9a-f]{2} ?)+)$", example, flags=re.MULTILINE)
     assert bytes.fromhex(" ".join(hex_lines)) == encode_command(GOLDEN)

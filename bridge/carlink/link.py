@@ -1,357 +1,44 @@
-"""Car link: velocity commands from a car process to its car, one UDP datagram each.
+"""Car-link sockets: the car process's sender and a car's receiver thread (thin I/O).
 
-Three layers (STYLE.md): a pure codec (:func:`encode_command` / :func:`decode_command`),
-the pure receiver logic that a car runs (:class:`CommandFilter`; mocap_sim's simulated
-car uses this very class), and thin socket wrappers (:class:`CommandSender`,
-:class:`CommandReceiver`).
-
-Datagram (version 1)
---------------------
-Exactly 30 bytes, little-endian, no padding, IEEE 754 floats::
-
-    offset size type  field
-    0      2    bytes magic        b"TF" (0x54 0x46)
-    2      1    u8    version      1
-    3      1    u8    car_id       1..255 (0 is invalid)
-    4      4    u32   seq          sequence number, +1 per datagram, wraps 0xFFFFFFFF -> 0
-    8      8    f64   stamp_s      sender's fleet clock, seconds (finite)
-    16     4    f32   v_mps        linear velocity, m/s (finite)
-    20     4    f32   omega_radps  angular velocity, rad/s, counter-clockwise positive (finite)
-    24     2    u16   flags        bit 0 E_STOP, bit 1 STOP, bits 2..15 must be 0
-    26     4    u32   crc32        CRC-32 over bytes 0..25
-
-Flags:
-
-* ``E_STOP`` (0x0001): stop now and stay stopped (latched) until a valid command arrives
-  *without* this bit. The sender keeps E_STOP in every datagram while an e-stop is on,
-  including the STOP datagrams it sends when it shuts down.
-* ``STOP`` (0x0002): hold still while this is the latest command (not latched); v and
-  omega are ignored. Sent on shutdown and when the car process loses its pose.
-
-CRC: CRC-32/ISO-HDLC, the one of zlib, Ethernet and PNG -- width 32, polynomial
-0x04C11DB7 (0xEDB88320 bit-reflected), init 0xFFFFFFFF, input and output reflected,
-xorout 0xFFFFFFFF; check value CRC("123456789") = 0xCBF43926. In Python
-``zlib.crc32(datagram[:26])``; bitwise in C::
-
-    uint32_t crc = 0xFFFFFFFF;
-    for (i = 0; i < 26; i++) {
-        crc ^= d[i];
-        for (k = 0; k < 8; k++) crc = (crc >> 1) ^ (0xEDB88320 & -(crc & 1));
-    }
-    crc ^= 0xFFFFFFFF;      /* compare with the u32 at offset 26 (little-endian) */
-
-Worked example: car 3, seq 0x01020304, stamp 12.5 s, v 0.25 m/s, omega -0.5 rad/s, no
-flags (CRC 0xC0E042BB)::
-
-    54 46 01 03 04 03 02 01 00 00 00 00 00 00 29 40
-    00 00 80 3e 00 00 00 bf 00 00 bb 42 e0 c0
-
-A receiver rejects, in this order: wrong length, bad magic, unknown version, bad CRC,
-car id 0, non-finite stamp/v/omega (NaN or infinity), reserved flag bits set. Encoding
-rounds v and omega to the nearest f32 (a value beyond the f32 range is an error).
-
-Receiver rules (what the car firmware does; :class:`CommandFilter`)
----------------------------------------------------------------------
-1. Decode; drop invalid datagrams and datagrams for another car id.
-2. Sequence numbers compare with serial-number arithmetic (RFC 1982, 32 bits): ``s`` is
-   after ``last`` iff ``0 < (s - last) mod 2**32 < 2**31``. Only a datagram after the
-   last accepted one is accepted: repeats, replays and datagrams overtaken on the air
-   are dropped. The first datagram ever is accepted whatever its seq.
-3. Restarted sender: a restarted car process starts a new sequence, which usually looks
-   "old". If no datagram has been *accepted* for ``resync_after_s`` (default 1.0 s), the
-   next valid datagram is accepted whatever its seq and becomes the new reference.
-   This is safe because ``resync_after_s`` is longer than the watchdog, so the car has
-   been standing still for a while when a new sequence is adopted, and whatever comes
-   next is again watched by the watchdog. Silence is measured from the last accepted
-   datagram, so a new sender's stream of "old" numbers cannot postpone the resync
-   forever. (The CRC detects corruption, not forgery: the link is not authenticated,
-   and after a silence a replayed capture looks like a restarted sender.)
-4. Watchdog: the command to apply is (0, 0) once the last accepted command is
-   ``watchdog_timeout_s`` (default 0.250 s) old, measured on the receiver's clock (the
-   sender's stamp is for logs and latency only; the clocks need not agree).
-5. (0, 0) also while E_STOP is latched, or while the latest command has STOP.
+The bytes are in :mod:`.codec`, the receiving rules in :mod:`.receiver`; this module only
+moves datagrams between them and UDP sockets.
 
 Sender (:class:`CommandSender`): sends the latest (v, omega, flags) at a fixed rate
 (default 50 Hz) on absolute deadlines ``start + k * period``; a late sender sends one
 datagram for the missed slots and carries on with the schedule (no bursts).
+
+Receiver (:class:`CommandReceiver`): a bound UDP socket and a reader thread that feeds
+every datagram to a :class:`~.receiver.CommandFilter` (mocap_sim's simulated cars use it).
 """
 
 from __future__ import annotations
 
-import enum
 import logging
 import math
-import operator
 import socket
-import struct
 import threading
 import time
-import zlib
 from collections import Counter
-from dataclasses import dataclass, field
-from typing import Callable, Mapping
+from dataclasses import dataclass
+from typing import Callable
+
+from trustfg.bridge.carlink.codec import SEQ_MODULUS, Command, Flags, _check_int, encode_command
+from trustfg.bridge.carlink.receiver import (
+    DEFAULT_RESYNC_AFTER_S,
+    DEFAULT_WATCHDOG_TIMEOUT_S,
+    CommandFilter,
+    FilterCounters,
+)
 
 log = logging.getLogger(__name__)
 
-MAGIC = b"TF"
-VERSION = 1
-DATAGRAM_SIZE = 30
-SEQ_MODULUS = 2**32
-_HALF_SEQ = 2**31
-_BODY = struct.Struct("<2sBBIdffH")  # bytes 0..25, covered by the CRC
-_CRC = struct.Struct("<I")
-_F32 = struct.Struct("<f")
 # recv buffer larger than a datagram, so an oversized datagram is seen (wrong length)
 # rather than silently truncated to 30 bytes.
 _RECV_BUFFER_BYTES = 2048
 
 DEFAULT_RATE_HZ = 50.0
-DEFAULT_WATCHDOG_TIMEOUT_S = 0.250
-DEFAULT_RESYNC_AFTER_S = 1.0
 
 Clock = Callable[[], float]
-
-
-class CarLinkError(ValueError):
-    """A car-link datagram or command field is invalid.
-
-    ``reason`` is a short machine-readable tag (``"length"``, ``"magic"``, ``"version"``,
-    ``"crc"``, ``"car_id"``, ``"non_finite"``, ``"flags"``, ``"range"``, ``"type"``) used
-    to count rejections; the last two come only from building a :class:`Command`.
-    """
-
-    def __init__(self, reason: str, detail: str):
-        super().__init__(f"{reason}: {detail}")
-        self.reason = reason
-
-
-class Flags(enum.IntFlag):
-    """Command flag bits (u16 at offset 24)."""
-
-    NONE = 0
-    E_STOP = 0x0001
-    STOP = 0x0002
-
-
-_KNOWN_FLAGS = int(Flags.E_STOP | Flags.STOP)
-
-
-# ----------------------------------------------------------------------------- codec
-
-
-@dataclass(frozen=True)
-class Command:
-    """One velocity command, validated on construction (raises :class:`CarLinkError`)."""
-
-    car_id: int
-    seq: int
-    stamp_s: float
-    v_mps: float
-    omega_radps: float
-    flags: Flags = Flags.NONE
-
-    def __post_init__(self) -> None:
-        _check_int("car_id", self.car_id, 1, 255)
-        _check_int("seq", self.seq, 0, SEQ_MODULUS - 1)
-        _check_int("flags", self.flags, 0, 0xFFFF)
-        if int(self.flags) & ~_KNOWN_FLAGS:
-            raise CarLinkError("flags", f"reserved flag bits set: 0x{int(self.flags):04x}")
-        object.__setattr__(self, "flags", Flags(int(self.flags)))
-        _check_float("stamp_s", self.stamp_s)
-        _check_float("v_mps", self.v_mps, f32=True)
-        _check_float("omega_radps", self.omega_radps, f32=True)
-
-    @property
-    def e_stop(self) -> bool:
-        return bool(self.flags & Flags.E_STOP)
-
-    @property
-    def stop(self) -> bool:
-        return bool(self.flags & Flags.STOP)
-
-
-def _check_int(name: str, value: object, low: int, high: int) -> None:
-    try:
-        number = operator.index(value)  # type: ignore[arg-type]
-    except TypeError:
-        raise CarLinkError("type", f"{name} must be an integer, got {value!r}") from None
-    if not low <= number <= high:
-        reason = "car_id" if name == "car_id" else "range"
-        raise CarLinkError(reason, f"{name} = {number} is outside {low}..{high}")
-
-
-def _check_float(name: str, value: object, f32: bool = False) -> None:
-    try:
-        finite = math.isfinite(value)  # type: ignore[arg-type]
-    except TypeError:
-        raise CarLinkError("type", f"{name} must be a number, got {value!r}") from None
-    if not finite:
-        raise CarLinkError("non_finite", f"{name} = {value!r}")
-    if f32:
-        try:
-            _F32.pack(value)
-        except (OverflowError, struct.error):
-            raise CarLinkError("range", f"{name} = {value!r} does not fit an f32") from None
-
-
-def encode_command(cmd: Command) -> bytes:
-    """The 30-byte datagram of ``cmd`` (v and omega rounded to f32)."""
-    body = _BODY.pack(MAGIC, VERSION, cmd.car_id, cmd.seq, cmd.stamp_s, cmd.v_mps,
-                      cmd.omega_radps, int(cmd.flags))
-    return body + _CRC.pack(zlib.crc32(body))
-
-
-def decode_command(data: bytes | bytearray | memoryview) -> Command:
-    """The command in a datagram; raises :class:`CarLinkError` (and nothing else) if invalid."""
-    if not isinstance(data, (bytes, bytearray, memoryview)):
-        raise CarLinkError("type", f"expected bytes, got {type(data).__name__}")
-    data = bytes(data)
-    if len(data) != DATAGRAM_SIZE:
-        raise CarLinkError("length", f"{len(data)} bytes, expected {DATAGRAM_SIZE}")
-    magic, version, car_id, seq, stamp_s, v_mps, omega_radps, flags = _BODY.unpack_from(data)
-    if magic != MAGIC:
-        raise CarLinkError("magic", f"magic {magic!r}, expected {MAGIC!r}")
-    if version != VERSION:
-        raise CarLinkError("version", f"version {version}, this end speaks {VERSION}")
-    (crc,) = _CRC.unpack_from(data, _BODY.size)
-    expected = zlib.crc32(data[:_BODY.size])
-    if crc != expected:
-        raise CarLinkError("crc", f"crc 0x{crc:08x}, computed 0x{expected:08x}")
-    return Command(car_id, seq, stamp_s, v_mps, omega_radps, flags)
-
-
-def seq_after(seq: int, last: int) -> bool:
-    """True if 32-bit sequence number ``seq`` comes after ``last`` (RFC 1982).
-
-    The distance 2**31 is undefined in RFC 1982; it counts as "not after" here.
-    """
-    distance = (seq - last) % SEQ_MODULUS
-    return 0 < distance < _HALF_SEQ
-
-
-# ----------------------------------------------------------------------- receiver logic
-
-
-@dataclass(frozen=True)
-class FilterCounters:
-    """A snapshot of what a :class:`CommandFilter` accepted and rejected.
-
-    ``resynced`` counts accepted datagrams whose seq was not after the last one and that
-    were taken under the restart rule (they are also in ``accepted``).
-    ``decode_errors`` maps a :class:`CarLinkError` reason to its count.
-    """
-
-    accepted: int = 0
-    resynced: int = 0
-    wrong_car: int = 0
-    stale_seq: int = 0
-    repeated_seq: int = 0
-    decode_errors: Mapping[str, int] = field(default_factory=dict)
-
-    @property
-    def decode_error(self) -> int:
-        return sum(self.decode_errors.values())
-
-    @property
-    def rejected(self) -> int:
-        return self.decode_error + self.wrong_car + self.stale_seq + self.repeated_seq
-
-
-class CommandFilter:
-    """The car's side of the link: which datagrams to accept and what to apply now.
-
-    Pure and single-threaded; times are seconds on the receiver's clock. See the module
-    docstring, "Receiver rules", for the rules and why the restart rule is safe.
-    """
-
-    def __init__(self, car_id: int, *, watchdog_timeout_s: float = DEFAULT_WATCHDOG_TIMEOUT_S,
-                 resync_after_s: float = DEFAULT_RESYNC_AFTER_S):
-        _check_int("car_id", car_id, 1, 255)
-        if not watchdog_timeout_s > 0.0:
-            raise ValueError(f"watchdog_timeout_s must be > 0, got {watchdog_timeout_s}")
-        if not resync_after_s > watchdog_timeout_s:
-            raise ValueError(f"resync_after_s ({resync_after_s}) must exceed watchdog_timeout_s "
-                             f"({watchdog_timeout_s}) so a new sequence is adopted only at a standstill")
-        self.car_id = car_id
-        self.watchdog_timeout_s = watchdog_timeout_s
-        self.resync_after_s = resync_after_s
-        self._last: Command | None = None
-        self._last_time_s = 0.0
-        self._e_stop_latched = False
-        self._counts: Counter[str] = Counter()
-        self._decode_errors: Counter[str] = Counter()
-
-    @property
-    def last_command(self) -> Command | None:
-        """The last accepted command, or None before the first."""
-        return self._last
-
-    @property
-    def e_stop_latched(self) -> bool:
-        return self._e_stop_latched
-
-    @property
-    def counters(self) -> FilterCounters:
-        return FilterCounters(accepted=self._counts["accepted"], resynced=self._counts["resynced"],
-                              wrong_car=self._counts["wrong_car"], stale_seq=self._counts["stale_seq"],
-                              repeated_seq=self._counts["repeated_seq"],
-                              decode_errors=dict(self._decode_errors))
-
-    def accept(self, data: bytes, now_s: float) -> Command | None:
-        """Decode and filter one datagram received at ``now_s``; None (counted) if dropped.
-
-        Never raises for any bytes-like input.
-        """
-        try:
-            cmd = decode_command(data)
-        except CarLinkError as exc:
-            self._decode_errors[exc.reason] += 1
-            log.debug("car %d: dropped invalid datagram (%s)", self.car_id, exc)
-            return None
-        if cmd.car_id != self.car_id:
-            self._counts["wrong_car"] += 1
-            log.debug("car %d: dropped datagram for car %d", self.car_id, cmd.car_id)
-            return None
-        if not self._sequence_ok(cmd, now_s):
-            return None
-        self._take(cmd, now_s)
-        return cmd
-
-    def active_command(self, now_s: float) -> tuple[float, float]:
-        """The (v_mps, omega_radps) to apply at ``now_s``: (0, 0) when stopped for any reason."""
-        cmd = self._last
-        if cmd is None or self._e_stop_latched or cmd.stop:
-            return 0.0, 0.0
-        if now_s - self._last_time_s >= self.watchdog_timeout_s:
-            return 0.0, 0.0
-        return cmd.v_mps, cmd.omega_radps
-
-    def _sequence_ok(self, cmd: Command, now_s: float) -> bool:
-        last = self._last
-        if last is None or seq_after(cmd.seq, last.seq):
-            return True
-        if now_s - self._last_time_s >= self.resync_after_s:
-            self._counts["resynced"] += 1
-            log.info("car %d: silent for %.3f s, adopting new sequence at seq %d (was %d)",
-                     self.car_id, now_s - self._last_time_s, cmd.seq, last.seq)
-            return True
-        key = "repeated_seq" if cmd.seq == last.seq else "stale_seq"
-        self._counts[key] += 1
-        log.debug("car %d: dropped seq %d (%s, last %d)", self.car_id, cmd.seq, key, last.seq)
-        return False
-
-    def _take(self, cmd: Command, now_s: float) -> None:
-        if cmd.e_stop and not self._e_stop_latched:
-            log.warning("car %d: E-STOP latched (seq %d)", self.car_id, cmd.seq)
-        elif self._e_stop_latched and not cmd.e_stop:
-            log.warning("car %d: E-STOP released (seq %d)", self.car_id, cmd.seq)
-        self._e_stop_latched = cmd.e_stop
-        self._last = cmd
-        self._last_time_s = now_s
-        self._counts["accepted"] += 1
-
-
-# --------------------------------------------------------------------------- sending
 
 
 def next_slot(last_slot: int, start_s: float, period_s: float, now_s: float) -> int:
