@@ -28,12 +28,10 @@ from trustfg.bridge.carlink.codec import (
     seq_after,
 )
 from trustfg.bridge.carlink.link import (
-    DEFAULT_RATE_HZ,
     Clock,
     CommandReceiver,
     CommandSender,
     SenderStats,
-    next_slot,
 )
 from trustfg.bridge.carlink.receiver import (
     DEFAULT_RESYNC_AFTER_S,
@@ -46,5 +44,5 @@ __all__ = [
     "DATAGRAM_SIZE", "MAGIC", "SEQ_MODULUS", "VERSION", "CarLinkError", "Command", "Flags",
     "decode_command", "encode_command", "seq_after",
     "DEFAULT_RESYNC_AFTER_S", "DEFAULT_WATCHDOG_TIMEOUT_S", "CommandFilter", "FilterCounters",
-    "DEFAULT_RATE_HZ", "Clock", "CommandReceiver", "CommandSender", "SenderStats", "next_slot",
+    "Clock", "CommandReceiver", "CommandSender", "SenderStats",
 ]

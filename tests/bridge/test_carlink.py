@@ -1,4 +1,4 @@
-"""Car link: codec golden bytes and rejections, receiver rules, sender schedule, loopback I/O."""
+"""Car link: codec golden bytes and rejections, receiver rules, sender, loopback I/O."""
 
 import re
 import socket
@@ -20,7 +20,6 @@ from trustfg.bridge.carlink import (
     codec,
     decode_command,
     encode_command,
-    next_slot,
     seq_after,
 )
 
@@ -324,22 +323,6 @@ def test_filter_parameters_are_checked():
         CommandFilter(0)
 
 
-# ------------------------------------------------------------------------- schedule
-
-
-def test_next_slot_on_time_and_slightly_late():
-    assert next_slot(0, 10.0, 0.02, 10.001) == 1
-    assert next_slot(4, 10.0, 0.02, 10.0995) == 5  # slot 5 due at 10.1, not yet
-    assert next_slot(4, 10.0, 0.02, 10.105) == 5  # late by 5 ms: send slot 5 at once
-
-
-def test_next_slot_skips_missed_slots_instead_of_bursting():
-    # slot 3 was sent, then the thread stalled until 10.175: slots 4..8 are due by now;
-    # one datagram (slot 8) goes at once, 4..7 are skipped
-    assert next_slot(3, 10.0, 0.02, 10.175) == 8
-    assert next_slot(8, 10.0, 0.02, 10.176) == 9  # back on the schedule: due at 10.18
-
-
 # --------------------------------------------------------------------------- sender
 
 
@@ -392,37 +375,29 @@ def test_shutdown_keeps_an_e_stop_on(udp_sink):
     assert f.e_stop_latched
 
 
-def test_sender_rejects_invalid_commands_in_the_callers_thread(udp_sink):
+def test_shutdown_after_an_e_stop_released_sends_plain_stop(udp_sink):
+    with CommandSender(CAR, udp_sink.getsockname(), stop_repeats=1) as tx:
+        tx.send(0.0, 0.0, Flags.E_STOP)
+        tx.send(0.2, 0.0)  # the last command decides: the e-stop was released
+    assert [c.flags for c in drain(udp_sink, 3)] == [Flags.E_STOP, Flags.NONE, Flags.STOP]
+
+
+def test_sender_rejects_invalid_commands(udp_sink):
     with CommandSender(CAR, udp_sink.getsockname(), stop_repeats=0) as tx:
         with pytest.raises(CarLinkError):
-            tx.set(float("nan"), 0.0)
+            tx.send(float("nan"), 0.0)
         with pytest.raises(CarLinkError):
             tx.send(0.0, 0.0, flags=0x80)
         assert tx.stats.sent == 0
-
-
-def test_sender_thread_skips_missed_slots_without_bursting(udp_sink):
-    offset = [0.0]
-    with CommandSender(CAR, udp_sink.getsockname(), rate_hz=50.0, stop_repeats=0,
-                       clock=lambda: time.monotonic() + offset[0]) as tx:
-        tx.set(0.1, 0.0)
-        started = time.monotonic()
-        tx.start()
-        drain(udp_sink, 3)
-        offset[0] = 0.2  # as if the thread had stalled for 10 periods
-        drain(udp_sink, 3)
-        tx.stop()
-        elapsed = time.monotonic() - started
-    stats = tx.stats
-    assert stats.skipped_slots >= 9
-    assert stats.periodic_sent <= elapsed * 50.0 + 2  # one datagram for the missed slots
+        tx.send(0.1, 0.0)
+    assert drain(udp_sink, 1)[0].seq == 0  # a rejected command uses up no sequence number
 
 
 def test_sender_parameters_are_checked(udp_sink):
-    with pytest.raises(ValueError, match="rate_hz"):
-        CommandSender(CAR, udp_sink.getsockname(), rate_hz=0.0)
     with pytest.raises(CarLinkError):
         CommandSender(0, udp_sink.getsockname())
+    with pytest.raises(CarLinkError):
+        CommandSender(CAR, udp_sink.getsockname(), first_seq=2**32)
 
 
 # ---------------------------------------------------------------- loopback integration
@@ -441,19 +416,18 @@ def f32(x):
 
 def test_loopback_50_hz_all_accepted_then_stopped(no_threads_left):
     with CommandReceiver(CAR, ("127.0.0.1", 0)) as rx:
-        with CommandSender(CAR, rx.address, rate_hz=50.0) as tx:
-            tx.set(0.3, 0.1)
-            tx.start()
+        with CommandSender(CAR, rx.address) as tx:
+            for _ in range(51):  # one second at 50 Hz, as the car process's control loop sends
+                tx.send(0.3, 0.1)
+                time.sleep(0.02)
             assert rx.wait_until(lambda c: c.accepted >= 51, timeout_s=5.0)
             assert rx.active_command() == (f32(0.3), f32(0.1))
             tx.stop()
             stats = tx.stats
-            assert not tx.running
+            assert stats.sent == 51 + 3
             assert rx.wait_until(lambda c: c.accepted >= stats.sent, timeout_s=2.0)
             assert rx.active_command() == (0.0, 0.0)  # the STOP datagrams
             assert rx.last_command.stop
-        assert stats.periodic_sent >= 51
-        assert 45.0 <= stats.achieved_rate_hz <= 55.0
         assert stats.send_errors == 0
         total = tx.stats.sent  # close() sent its STOPs as well
         assert total == stats.sent + 3
@@ -465,10 +439,10 @@ def test_loopback_50_hz_all_accepted_then_stopped(no_threads_left):
 
 def test_loopback_watchdog_after_sender_goes_silent(no_threads_left):
     with CommandReceiver(CAR, ("127.0.0.1", 0)) as rx:
-        tx = CommandSender(CAR, rx.address, rate_hz=100.0, stop_repeats=0)
-        tx.set(0.2, 0.0)
-        tx.start()
-        assert rx.wait_until(lambda c: c.accepted >= 5, timeout_s=3.0)
+        tx = CommandSender(CAR, rx.address, stop_repeats=0)
+        for _ in range(5):
+            tx.send(0.2, 0.0)
+            time.sleep(0.01)
         tx.close()  # no STOP datagrams: the sender just goes silent
         sent = tx.stats.sent
         assert rx.wait_until(lambda c: c.accepted >= sent, timeout_s=2.0)
@@ -492,7 +466,7 @@ def test_close_is_bounded_and_joins(no_threads_left):
     rx = CommandReceiver(CAR, ("127.0.0.1", 0), recv_timeout_s=0.1)
     rx.start()
     tx = CommandSender(CAR, rx.address, stop_repeats=1)
-    tx.start()
+    tx.send(0.1, 0.0)
     started = time.monotonic()
     tx.close()
     rx.close()
