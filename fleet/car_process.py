@@ -257,11 +257,10 @@ class CarProcess:
 
     def run(self, stats_path: Path | None = None) -> int:
         scenario, car = self.scenario, self.car
-        control = scenario.control
         host, port = parse_udp_address(car.link, f"cars[id={car.id}].link")
         sys.setswitchinterval(SWITCH_INTERVAL_S)
         log.info("car %d: NatNet %s at %s, link %s", car.id, scenario.natnet.mode, scenario.natnet.server, car.link)
-        with CommandSender(car.id, (host, port), rate_hz=control.command_rate_hz, stamp_clock=self.clock) as sender, \
+        with CommandSender(car.id, (host, port), stamp_clock=self.clock) as sender, \
                 NatNetClient(self.natnet, on_frame=self._on_frame) as natnet_client, \
                 FleetBus(scenario.bus, scenario.fleet, car.id, listen=car.listen, clock=self.clock) as bus:
             controller = threading.Thread(target=self._control_loop, args=(natnet_client, sender),

@@ -1,9 +1,11 @@
 """mocap-sim as a process: its NatNet stream, for every version, and its cars' link."""
 
+import contextlib
 import csv
 import dataclasses
 import subprocess
 import sys
+import threading
 import time
 
 import pytest
@@ -14,6 +16,7 @@ from trustfg.bridge import natnet
 from trustfg.bridge.carlink import CommandSender
 from trustfg.bridge.natnet_client import NatNetClient, NatNetClientOptions
 from trustfg.fleet.launch import loopback_fleet
+from trustfg.fleet.ticker import ticks
 
 
 @pytest.fixture
@@ -42,6 +45,25 @@ def stop(process):
             process.kill()
         process.stdout.close()
         process.stderr.close()
+
+
+@contextlib.contextmanager
+def streaming(sender, v_mps, omega_radps, rate_hz=50.0):
+    """Send one command at ``rate_hz`` from a thread, as a car process's control loop does."""
+    halt = threading.Event()
+
+    def loop():
+        for _ in ticks(1.0 / rate_hz, halt):
+            sender.send(v_mps, omega_radps)
+
+    thread = threading.Thread(target=loop, name="test-command-stream", daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        halt.set()
+        thread.join(2.0)
+        assert not thread.is_alive()
 
 
 def truth_rows(path, car_id):
@@ -76,9 +98,8 @@ def test_a_mocap_sim_car_obeys_commands_and_stops_by_itself(two_cars, tmp_path):
     host, port = car.link[len("udp://"):].rsplit(":", 1)
     try:
         with CommandSender(car.id, (host, int(port))) as sender:
-            sender.set(0.3, 0.0)
-            sender.start()
-            assert wait_for(lambda: (rows := truth_rows(truth, car.id)) and float(rows[-1]["v"]) > 0.29, 5.0)
+            with streaming(sender, 0.3, 0.0):
+                assert wait_for(lambda: (rows := truth_rows(truth, car.id)) and float(rows[-1]["v"]) > 0.29, 5.0)
             silent_from = time.time()
             sender.stop()
         # The STOP datagrams or, failing them, the 250 ms watchdog bring it to rest.

@@ -1,0 +1,181 @@
+"""Car-link codec: the bytes of one velocity command, and nothing else (pure, no I/O).
+
+Datagram (version 1)
+--------------------
+Exactly 30 bytes, little-endian, no padding, IEEE 754 floats::
+
+    offset size type  field
+    0      2    bytes magic        b"TF" (0x54 0x46)
+    2      1    u8    version      1
+    3      1    u8    car_id       1..255 (0 is invalid)
+    4      4    u32   seq          sequence number, +1 per datagram, wraps 0xFFFFFFFF -> 0
+    8      8    f64   stamp_s      sender's fleet clock, seconds (finite)
+    16     4    f32   v_mps        linear velocity, m/s (finite)
+    20     4    f32   omega_radps  angular velocity, rad/s, counter-clockwise positive (finite)
+    24     2    u16   flags        bit 0 E_STOP, bit 1 STOP, bits 2..15 must be 0
+    26     4    u32   crc32        CRC-32 over bytes 0..25
+
+Flags:
+
+* ``E_STOP`` (0x0001): stop now and stay stopped (latched) until a valid command arrives
+  *without* this bit. The sender keeps E_STOP in every datagram while an e-stop is on,
+  including the STOP datagrams it sends when it shuts down.
+* ``STOP`` (0x0002): hold still while this is the latest command (not latched); v and
+  omega are ignored. Sent on shutdown and when the car process loses its pose.
+
+CRC: CRC-32/ISO-HDLC, the one of zlib, Ethernet and PNG -- width 32, polynomial
+0x04C11DB7 (0xEDB88320 bit-reflected), init 0xFFFFFFFF, input and output reflected,
+xorout 0xFFFFFFFF; check value CRC("123456789") = 0xCBF43926. In Python
+``zlib.crc32(datagram[:26])``; bitwise in C::
+
+    uint32_t crc = 0xFFFFFFFF;
+    for (i = 0; i < 26; i++) {
+        crc ^= d[i];
+        for (k = 0; k < 8; k++) crc = (crc >> 1) ^ (0xEDB88320 & -(crc & 1));
+    }
+    crc ^= 0xFFFFFFFF;      /* compare with the u32 at offset 26 (little-endian) */
+
+Worked example: car 3, seq 0x01020304, stamp 12.5 s, v 0.25 m/s, omega -0.5 rad/s, no
+flags (CRC 0xC0E042BB)::
+
+    54 46 01 03 04 03 02 01 00 00 00 00 00 00 29 40
+    00 00 80 3e 00 00 00 bf 00 00 bb 42 e0 c0
+
+A receiver rejects, in this order: wrong length, bad magic, unknown version, bad CRC,
+car id 0, non-finite stamp/v/omega (NaN or infinity), reserved flag bits set. Encoding
+rounds v and omega to the nearest f32 (a value beyond the f32 range is an error).
+
+What a car does with the commands it decodes is in :mod:`.receiver`.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+import operator
+import struct
+import zlib
+from dataclasses import dataclass
+
+MAGIC = b"TF"
+VERSION = 1
+DATAGRAM_SIZE = 30
+SEQ_MODULUS = 2**32
+_HALF_SEQ = 2**31
+_BODY = struct.Struct("<2sBBIdffH")  # bytes 0..25, covered by the CRC
+_CRC = struct.Struct("<I")
+_F32 = struct.Struct("<f")
+
+
+class CarLinkError(ValueError):
+    """A car-link datagram or command field is invalid.
+
+    ``reason`` is a short machine-readable tag (``"length"``, ``"magic"``, ``"version"``,
+    ``"crc"``, ``"car_id"``, ``"non_finite"``, ``"flags"``, ``"range"``, ``"type"``) used
+    to count rejections; the last two come only from building a :class:`Command`.
+    """
+
+    def __init__(self, reason: str, detail: str):
+        super().__init__(f"{reason}: {detail}")
+        self.reason = reason
+
+
+class Flags(enum.IntFlag):
+    """Command flag bits (u16 at offset 24)."""
+
+    NONE = 0
+    E_STOP = 0x0001
+    STOP = 0x0002
+
+
+_KNOWN_FLAGS = int(Flags.E_STOP | Flags.STOP)
+
+
+@dataclass(frozen=True)
+class Command:
+    """One velocity command, validated on construction (raises :class:`CarLinkError`)."""
+
+    car_id: int
+    seq: int
+    stamp_s: float
+    v_mps: float
+    omega_radps: float
+    flags: Flags = Flags.NONE
+
+    def __post_init__(self) -> None:
+        _check_int("car_id", self.car_id, 1, 255)
+        _check_int("seq", self.seq, 0, SEQ_MODULUS - 1)
+        _check_int("flags", self.flags, 0, 0xFFFF)
+        if int(self.flags) & ~_KNOWN_FLAGS:
+            raise CarLinkError("flags", f"reserved flag bits set: 0x{int(self.flags):04x}")
+        object.__setattr__(self, "flags", Flags(int(self.flags)))
+        _check_float("stamp_s", self.stamp_s)
+        _check_float("v_mps", self.v_mps, f32=True)
+        _check_float("omega_radps", self.omega_radps, f32=True)
+
+    @property
+    def e_stop(self) -> bool:
+        return bool(self.flags & Flags.E_STOP)
+
+    @property
+    def stop(self) -> bool:
+        return bool(self.flags & Flags.STOP)
+
+
+def _check_int(name: str, value: object, low: int, high: int) -> None:
+    try:
+        number = operator.index(value)  # type: ignore[arg-type]
+    except TypeError:
+        raise CarLinkError("type", f"{name} must be an integer, got {value!r}") from None
+    if not low <= number <= high:
+        reason = "car_id" if name == "car_id" else "range"
+        raise CarLinkError(reason, f"{name} = {number} is outside {low}..{high}")
+
+
+def _check_float(name: str, value: object, f32: bool = False) -> None:
+    try:
+        finite = math.isfinite(value)  # type: ignore[arg-type]
+    except TypeError:
+        raise CarLinkError("type", f"{name} must be a number, got {value!r}") from None
+    if not finite:
+        raise CarLinkError("non_finite", f"{name} = {value!r}")
+    if f32:
+        try:
+            _F32.pack(value)
+        except (OverflowError, struct.error):
+            raise CarLinkError("range", f"{name} = {value!r} does not fit an f32") from None
+
+
+def encode_command(cmd: Command) -> bytes:
+    """The 30-byte datagram of ``cmd`` (v and omega rounded to f32)."""
+    body = _BODY.pack(MAGIC, VERSION, cmd.car_id, cmd.seq, cmd.stamp_s, cmd.v_mps,
+                      cmd.omega_radps, int(cmd.flags))
+    return body + _CRC.pack(zlib.crc32(body))
+
+
+def decode_command(data: bytes | bytearray | memoryview) -> Command:
+    """The command in a datagram; raises :class:`CarLinkError` (and nothing else) if invalid."""
+    if not isinstance(data, (bytes, bytearray, memoryview)):
+        raise CarLinkError("type", f"expected bytes, got {type(data).__name__}")
+    data = bytes(data)
+    if len(data) != DATAGRAM_SIZE:
+        raise CarLinkError("length", f"{len(data)} bytes, expected {DATAGRAM_SIZE}")
+    magic, version, car_id, seq, stamp_s, v_mps, omega_radps, flags = _BODY.unpack_from(data)
+    if magic != MAGIC:
+        raise CarLinkError("magic", f"magic {magic!r}, expected {MAGIC!r}")
+    if version != VERSION:
+        raise CarLinkError("version", f"version {version}, this end speaks {VERSION}")
+    (crc,) = _CRC.unpack_from(data, _BODY.size)
+    expected = zlib.crc32(data[:_BODY.size])
+    if crc != expected:
+        raise CarLinkError("crc", f"crc 0x{crc:08x}, computed 0x{expected:08x}")
+    return Command(car_id, seq, stamp_s, v_mps, omega_radps, flags)
+
+
+def seq_after(seq: int, last: int) -> bool:
+    """True if 32-bit sequence number ``seq`` comes after ``last`` (RFC 1982).
+
+    The distance 2**31 is undefined in RFC 1982; it counts as "not after" here.
+    """
+    distance = (seq - last) % SEQ_MODULUS
+    return 0 < distance < _HALF_SEQ

@@ -1,0 +1,264 @@
+"""Car-link sockets: the car process's sender and a car's receiver thread (thin I/O).
+
+The bytes are in :mod:`.codec`, the receiving rules in :mod:`.receiver`; this module only
+moves datagrams between them and UDP sockets.
+
+Sender (:class:`CommandSender`): one datagram per :meth:`~CommandSender.send`, numbered
+and stamped. It keeps no schedule of its own: the car process's control loop calls
+``send()`` at ``control.command_rate_hz`` (50 Hz) on absolute deadlines, and a late tick
+sends once rather than catching up in a burst (``fleet/ticker.py``). On shutdown it sends
+a few STOP datagrams, with E_STOP if the last command had it.
+
+Receiver (:class:`CommandReceiver`): a bound UDP socket and a reader thread that feeds
+every datagram to a :class:`~.receiver.CommandFilter` (mocap_sim's simulated cars use it).
+"""
+
+from __future__ import annotations
+
+import logging
+import socket
+import threading
+import time
+from dataclasses import dataclass
+from typing import Callable
+
+from trustfg.bridge.carlink.codec import SEQ_MODULUS, Command, Flags, _check_int, encode_command
+from trustfg.bridge.carlink.receiver import (
+    DEFAULT_RESYNC_AFTER_S,
+    DEFAULT_WATCHDOG_TIMEOUT_S,
+    CommandFilter,
+    FilterCounters,
+)
+
+log = logging.getLogger(__name__)
+
+# recv buffer larger than a datagram, so an oversized datagram is seen (wrong length)
+# rather than silently truncated to 30 bytes.
+_RECV_BUFFER_BYTES = 2048
+
+Clock = Callable[[], float]
+
+
+@dataclass(frozen=True)
+class SenderStats:
+    """Counts of a :class:`CommandSender`: ``sent`` datagrams handed to the socket (commands
+    and STOP datagrams alike) and ``send_errors``, datagrams the socket refused."""
+
+    sent: int = 0
+    send_errors: int = 0
+
+
+def _resolve(address: tuple[str, int], passive: bool) -> tuple[socket.AddressFamily, tuple]:
+    """Resolve once (not per datagram), preferring IPv4 so that "localhost" means the same
+    address to a sender and a receiver."""
+    flags = socket.AI_PASSIVE if passive else 0
+    host = address[0] or None
+    try:
+        infos = socket.getaddrinfo(host, address[1], socket.AF_INET, socket.SOCK_DGRAM, flags=flags)
+    except socket.gaierror:
+        infos = socket.getaddrinfo(host, address[1], socket.AF_UNSPEC, socket.SOCK_DGRAM, flags=flags)
+    family, _, _, _, sockaddr = infos[0]
+    return family, sockaddr
+
+
+class CommandSender:
+    """Sends one car's commands over UDP, one datagram per :meth:`send`; owns one socket.
+
+    The caller sets the pace (the car process's control loop). ``stop()`` sends
+    ``stop_repeats`` STOP datagrams, keeping E_STOP if the last command given to
+    :meth:`send` had it, so shutting down never releases a car's e-stop; ``close()``
+    (also on leaving a ``with`` block) stops and closes the socket. Sequence numbers start
+    at ``first_seq`` and wrap. ``stamp_clock`` stamps datagrams -- pass the fleet clock.
+    Safe to call from two threads (a control thread sending, the main thread stopping).
+    """
+
+    def __init__(self, car_id: int, address: tuple[str, int], *, stamp_clock: Clock = time.monotonic,
+                 first_seq: int = 0, stop_repeats: int = 3, stop_spacing_s: float = 0.005,
+                 send_timeout_s: float = 0.1):
+        _check_int("car_id", car_id, 1, 255)
+        _check_int("seq", first_seq, 0, SEQ_MODULUS - 1)
+        self.car_id = car_id
+        self._stamp_clock = stamp_clock
+        self._seq = first_seq
+        self._stop_repeats = stop_repeats
+        self._stop_spacing_s = stop_spacing_s
+        family, self._sockaddr = _resolve(address, passive=False)
+        self._sock: socket.socket | None = socket.socket(family, socket.SOCK_DGRAM)
+        self._sock.settimeout(send_timeout_s)
+        self._lock = threading.Lock()  # seq, socket, last flags and counts
+        self._last_flags = Flags.NONE
+        self._sent = 0
+        self._send_errors = 0
+
+    def __enter__(self) -> CommandSender:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    @property
+    def stats(self) -> SenderStats:
+        with self._lock:
+            return SenderStats(sent=self._sent, send_errors=self._send_errors)
+
+    def send(self, v_mps: float, omega_radps: float, flags: Flags | int = Flags.NONE) -> Command | None:
+        """Send one datagram now, stamped and numbered; the command, or None if the socket failed.
+
+        Invalid fields raise :class:`CarLinkError`. A failed send is logged and counted:
+        to the car it is a lost datagram.
+        """
+        with self._lock:
+            if self._sock is None:
+                raise RuntimeError(f"car {self.car_id}: sender is closed")
+            cmd = Command(self.car_id, self._seq, self._stamp_clock(), v_mps, omega_radps, flags)
+            self._seq = (self._seq + 1) % SEQ_MODULUS
+            # What the caller asked for, even if the socket fails: stop() keeps an e-stop
+            # whose own datagram was lost.
+            self._last_flags = cmd.flags
+            try:
+                self._sock.sendto(encode_command(cmd), self._sockaddr)
+            except OSError as exc:
+                self._send_errors += 1
+                log.warning("car %d: send of seq %d failed: %s", self.car_id, cmd.seq, exc)
+                return None
+            self._sent += 1
+            return cmd
+
+    def stop(self) -> None:
+        """Send the STOP datagrams (E_STOP kept if the last command had it); a no-op once closed."""
+        with self._lock:
+            if self._sock is None:
+                return
+            flags = Flags.STOP | (self._last_flags & Flags.E_STOP)
+        for i in range(self._stop_repeats):
+            if i:
+                time.sleep(self._stop_spacing_s)  # spread out: Wi-Fi loses bursts together
+            self.send(0.0, 0.0, flags)
+
+    def close(self) -> None:
+        """Stop (sending STOP) and close the socket; safe to call twice."""
+        if self._sock is None:
+            return
+        self.stop()
+        with self._lock:
+            if self._sock is not None:
+                self._sock.close()
+                self._sock = None
+
+
+# ------------------------------------------------------------------------- receiving
+
+
+class CommandReceiver:
+    """Receives one car's commands: a bound UDP socket and a reader thread feeding a
+    :class:`CommandFilter`.
+
+    The socket is bound on construction (``address`` tells the port when 0 was asked
+    for); the reader runs between :meth:`start` (or entering a ``with`` block) and
+    :meth:`close`. ``clock`` stamps arrivals and is the default ``now`` of
+    :meth:`active_command`.
+    """
+
+    def __init__(self, car_id: int, bind_address: tuple[str, int], *,
+                 watchdog_timeout_s: float = DEFAULT_WATCHDOG_TIMEOUT_S,
+                 resync_after_s: float = DEFAULT_RESYNC_AFTER_S, clock: Clock = time.monotonic,
+                 recv_timeout_s: float = 0.1, join_timeout_s: float = 1.0):
+        self._filter = CommandFilter(car_id, watchdog_timeout_s=watchdog_timeout_s,
+                                     resync_after_s=resync_after_s)
+        self.car_id = car_id
+        self._clock = clock
+        self._join_timeout_s = join_timeout_s
+        family, sockaddr = _resolve(bind_address, passive=True)
+        self._sock: socket.socket | None = socket.socket(family, socket.SOCK_DGRAM)
+        try:
+            self._sock.bind(sockaddr)
+        except OSError:
+            self._sock.close()
+            raise
+        self._sock.settimeout(recv_timeout_s)
+        self.address: tuple = self._sock.getsockname()
+        self._changed = threading.Condition()  # guards the filter; notified per datagram
+        self._halt = threading.Event()
+        self._thread: threading.Thread | None = None
+        self.receive_errors = 0
+        self.deaf = threading.Event()
+        """While set, arriving datagrams are discarded unread (a simulated cut link)."""
+        self.discarded = 0
+
+    def __enter__(self) -> CommandReceiver:
+        self.start()
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    @property
+    def counters(self) -> FilterCounters:
+        with self._changed:
+            return self._filter.counters
+
+    @property
+    def last_command(self) -> Command | None:
+        with self._changed:
+            return self._filter.last_command
+
+    def active_command(self, now_s: float | None = None) -> tuple[float, float]:
+        """The (v_mps, omega_radps) to apply at ``now_s`` (default: the clock's now)."""
+        now = self._clock() if now_s is None else now_s
+        with self._changed:
+            return self._filter.active_command(now)
+
+    def wait_until(self, predicate: Callable[[FilterCounters], bool], timeout_s: float) -> bool:
+        """Block until ``predicate(counters)`` holds or ``timeout_s`` passes; whether it held."""
+        with self._changed:
+            return self._changed.wait_for(lambda: predicate(self._filter.counters), timeout_s)
+
+    def start(self) -> None:
+        if self._sock is None:
+            raise RuntimeError(f"car {self.car_id}: receiver is closed")
+        if self._thread is not None:
+            return
+        self._thread = threading.Thread(target=self._run, args=(self._sock,), name=f"carlink-rx-{self.car_id}",
+                                        daemon=True)
+        self._thread.start()
+
+    def close(self) -> None:
+        """Stop and join the reader, then close the socket; safe to call twice."""
+        if self._thread is not None:
+            self._halt.set()
+            self._thread.join(self._join_timeout_s)
+            if self._thread.is_alive():
+                log.error("car %d: receiver thread did not stop within %.1f s",
+                          self.car_id, self._join_timeout_s)
+            self._thread = None
+        if self._sock is not None:
+            self._sock.close()
+            self._sock = None
+
+    def _run(self, sock: socket.socket) -> None:
+        try:
+            while not self._halt.is_set():
+                self._receive_one(sock)
+        except Exception:  # the loop's edge: without commands the watchdog stops the car
+            log.exception("car %d: receiver thread failed; commands stop, the watchdog stops the car",
+                          self.car_id)
+
+    def _receive_one(self, sock: socket.socket) -> None:
+        try:
+            data, _ = sock.recvfrom(_RECV_BUFFER_BYTES)
+        except TimeoutError:
+            return
+        except OSError as exc:
+            if self._halt.is_set():
+                return  # closed under us after a join timeout
+            self.receive_errors += 1
+            log.warning("car %d: receive failed: %s", self.car_id, exc)
+            self._halt.wait(0.05)  # back off rather than spin on a persistent error
+            return
+        if self.deaf.is_set():
+            self.discarded += 1
+            return
+        now = self._clock()
+        with self._changed:
+            self._filter.accept(data, now)
+            self._changed.notify_all()
