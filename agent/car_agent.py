@@ -40,14 +40,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from trustfg.agent import misbehaviour
-from trustfg.agent.config import CarConfig, Scenario
-from trustfg.agent.gp import Plan, standing
-from trustfg.agent.messages import PlanMessage, TrustReport
-from trustfg.agent.planner import PeerConstraint, PlanningError, PlanRequest, PlanResult, plan_trajectory
-from trustfg.agent.track import Track
-from trustfg.agent.trust import CONSISTENCY, SAFETY, TRANSPARENCY, TrustBook, graded
-from trustfg.agent.world import SignedDistanceField
+from . import misbehaviour
+from .config import CarConfig, Scenario
+from .gp import Plan, standing
+from .messages import PlanMessage, TrustReport
+from .planner import PeerConstraint, PlanningError, PlanRequest, PlanResult, plan_trajectory
+from .track import Track
+from .trust import CONSISTENCY, SAFETY, TRANSPARENCY, TrustBook, graded
+from .world import SignedDistanceField
 
 log = logging.getLogger(__name__)
 

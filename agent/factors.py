@@ -36,7 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from trustfg.agent.world import SignedDistanceField
+from .world import SignedDistanceField
 
 SMOOTH_ACCEL_DELTA = 0.2
 """delta of the smooth magnitude |a|_delta, m/s^2: keeps the consistency row

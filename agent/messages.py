@@ -40,7 +40,7 @@ from typing import Any, Union
 import msgpack
 import numpy as np
 
-from trustfg.agent.gp import Plan
+from .gp import Plan
 
 SCHEMA_VERSION = 1
 MAX_MESSAGE_BYTES = 64 * 1024

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from trustfg.agent.world import SignedDistanceField
+from .world import SignedDistanceField
 
 ACCEL_WINDOW_S = 0.2
 

@@ -17,8 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from trustfg.agent.gp import Plan
-from trustfg.agent.messages import PeerTrust, TrustReport
+from .gp import Plan
+from .messages import PeerTrust, TrustReport
 
 FALSE_OFFSET_MIN_M = 0.4
 FALSE_OFFSET_MAX_M = 0.8

@@ -38,10 +38,10 @@ import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import A, B, V, X
 
-from trustfg.agent import factors
-from trustfg.agent.config import PlannerConfig
-from trustfg.agent.gp import Plan, interpolation_weights
-from trustfg.agent.world import SignedDistanceField
+from . import factors
+from .config import PlannerConfig
+from .gp import Plan, interpolation_weights
+from .world import SignedDistanceField
 
 
 class PlanningError(RuntimeError):

@@ -22,7 +22,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from trustfg.agent.config import ConfigError, Scenario
+from .config import ConfigError, Scenario
 
 SHIPPED_PACKAGE = "trustfg.deploy"
 

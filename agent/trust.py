@@ -43,8 +43,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from trustfg.agent.config import TrustConfig
-from trustfg.agent.messages import DIMENSIONS, PeerTrust, TrustReport
+from .config import TrustConfig
+from .messages import DIMENSIONS, PeerTrust, TrustReport
 
 SAFETY, CONSISTENCY, TRANSPARENCY = range(3)
 

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from trustfg.agent.config import VehicleConfig
+from .config import VehicleConfig
 
 
 @dataclass(frozen=True)

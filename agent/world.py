@@ -20,7 +20,7 @@ import numpy as np
 from matplotlib.path import Path as PolygonPath
 from scipy import ndimage
 
-from trustfg.agent.config import Obstacle, WorldConfig
+from .config import Obstacle, WorldConfig
 
 
 @dataclass(frozen=True)

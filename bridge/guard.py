@@ -29,8 +29,8 @@ from collections.abc import Iterable
 
 import numpy as np
 
-from trustfg.agent.config import GuardConfig, SafetyConfig
-from trustfg.agent.world import SignedDistanceField
+from ..agent.config import GuardConfig, SafetyConfig
+from ..agent.world import SignedDistanceField
 
 RAY_STEP_M = 0.02
 RAY_LENGTH_M = 1.5

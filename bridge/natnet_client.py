@@ -48,9 +48,9 @@ import time
 from dataclasses import dataclass
 from typing import Callable
 
-from trustfg.agent.config import NatNetConfig
-from trustfg.bridge import natnet
-from trustfg.bridge.natnet import (
+from ..agent.config import NatNetConfig
+from . import natnet
+from .natnet import (
     ConnectRequest,
     Frame,
     MessageId,
@@ -59,7 +59,7 @@ from trustfg.bridge.natnet import (
     Version,
     supports_frames,
 )
-from trustfg.bridge.natnet_receiver import BodySample, FrameReceiver, NatNetStats
+from .natnet_receiver import BodySample, FrameReceiver, NatNetStats
 
 __all__ = ["NatNetClientOptions", "NatNetClient", "NatNetConnectionError", "FrameReceiver",
            "BodySample", "NatNetStats"]

@@ -17,8 +17,8 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Callable, Mapping
 
-from trustfg.bridge import natnet
-from trustfg.bridge.natnet import Frame, MessageId, NatNetError, RigidBody, ServerInfo, Version, supports_frames
+from . import natnet
+from .natnet import Frame, MessageId, NatNetError, RigidBody, ServerInfo, Version, supports_frames
 
 __all__ = ["FrameReceiver", "BodySample", "NatNetStats"]
 

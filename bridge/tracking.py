@@ -24,8 +24,8 @@ import math
 
 import numpy as np
 
-from trustfg.agent.config import TrackingConfig, VehicleConfig
-from trustfg.agent.gp import Plan
+from ..agent.config import TrackingConfig, VehicleConfig
+from ..agent.gp import Plan
 
 STANDSTILL_MPS = 0.02
 

@@ -18,11 +18,11 @@ from pathlib import Path
 
 import numpy as np
 
-from trustfg.agent import metrics
-from trustfg.agent.world import build_sdf
-from trustfg.fleet import figures
-from trustfg.fleet.recording import read_recording, resolve_run
-from trustfg.fleet.runs import RunRecord, arrivals, motion_summary, rounded
+from ..agent import metrics
+from ..agent.world import build_sdf
+from ..fleet import figures
+from ..fleet.recording import read_recording, resolve_run
+from ..fleet.runs import RunRecord, arrivals, motion_summary, rounded
 
 TRUST_SAMPLE_S = 0.1
 

@@ -36,12 +36,12 @@ from starlette.routing import Mount, Route, WebSocketRoute
 from starlette.staticfiles import StaticFiles
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
-from trustfg.agent import messages
-from trustfg.agent.config import ConfigError, Scenario
-from trustfg.agent.scenario_files import load_scenario
-from trustfg.dashboard.state import FleetView
-from trustfg.fleet.bus import FleetBus
-from trustfg.fleet.recording import Recorded, read_recording, resolve_run
+from ..agent import messages
+from ..agent.config import ConfigError, Scenario
+from ..agent.scenario_files import load_scenario
+from ..fleet.bus import FleetBus
+from ..fleet.recording import Recorded, read_recording, resolve_run
+from .state import FleetView
 
 log = logging.getLogger(__name__)
 

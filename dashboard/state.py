@@ -24,8 +24,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from matplotlib.colors import to_hex
 
-from trustfg.agent import messages, metrics
-from trustfg.agent.config import Scenario
+from ..agent import messages, metrics
+from ..agent.config import Scenario
 
 RATE_WINDOW_S = 2.0
 STALE_AFTER_S = 1.5

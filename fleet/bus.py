@@ -24,8 +24,8 @@ from typing import Callable
 import zenoh
 import zenoh.ext as zext
 
-from trustfg.agent.config import BusConfig
-from trustfg.fleet.keys import ALIVE, KINDS, START, every_car, fleet_key, key, parse_key
+from ..agent.config import BusConfig
+from .keys import ALIVE, KINDS, START, every_car, fleet_key, key, parse_key
 
 log = logging.getLogger(__name__)
 

@@ -45,20 +45,20 @@ from pathlib import Path
 
 import numpy as np
 
-from trustfg.agent import messages
-from trustfg.agent.car_agent import CarAgent
-from trustfg.agent.config import CarConfig, ConfigError, Scenario, parse_udp_address
-from trustfg.agent.gp import standing
-from trustfg.agent.scenario_files import load_scenario
-from trustfg.agent.world import build_sdf
-from trustfg.bridge import natnet
-from trustfg.bridge.carlink import CommandSender, Flags
-from trustfg.bridge.guard import speed_cap
-from trustfg.bridge.natnet_client import NatNetClient, NatNetClientOptions
-from trustfg.bridge.tracking import track
-from trustfg.fleet.bus import FleetBus, Received
-from trustfg.fleet.command import configured, stop_on_signals
-from trustfg.fleet.ticker import ticks
+from ..agent import messages
+from ..agent.car_agent import CarAgent
+from ..agent.config import CarConfig, ConfigError, Scenario, parse_udp_address
+from ..agent.gp import standing
+from ..agent.scenario_files import load_scenario
+from ..agent.world import build_sdf
+from ..bridge import natnet
+from ..bridge.carlink import CommandSender, Flags
+from ..bridge.guard import speed_cap
+from ..bridge.natnet_client import NatNetClient, NatNetClientOptions
+from ..bridge.tracking import track
+from .bus import FleetBus, Received
+from .command import configured, stop_on_signals
+from .ticker import ticks
 
 log = logging.getLogger(__name__)
 

@@ -12,7 +12,7 @@ import sys
 import threading
 from typing import Callable, TypeVar
 
-from trustfg.agent.config import ConfigError
+from ..agent.config import ConfigError
 
 T = TypeVar("T")
 

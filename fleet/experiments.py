@@ -30,13 +30,13 @@ from typing import Callable
 
 import numpy as np
 
-from trustfg.agent import metrics
-from trustfg.agent.config import Scenario
-from trustfg.agent.scenario_files import load_scenario
-from trustfg.agent.world import build_sdf
-from trustfg.fleet.command import configured
-from trustfg.fleet.fleet_sim import simulate
-from trustfg.fleet.runs import RunRecord, motion_summary, rounded
+from ..agent import metrics
+from ..agent.config import Scenario
+from ..agent.scenario_files import load_scenario
+from ..agent.world import build_sdf
+from .command import configured
+from .fleet_sim import simulate
+from .runs import RunRecord, motion_summary, rounded
 
 log = logging.getLogger(__name__)
 
@@ -166,7 +166,7 @@ def run_experiment(name: str, seeds: list[int], out: Path, jobs: int, scenario_f
     target.mkdir(parents=True, exist_ok=True)
     (target / "metrics.json").write_text(json.dumps(report, indent=1))
     if figures:
-        from trustfg.fleet import figures as fig  # matplotlib only when figures are wanted
+        from . import figures as fig  # matplotlib only when figures are wanted
         fig.experiment_figures(name, base, results, records, target)
     return report
 

@@ -46,9 +46,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
-from trustfg.agent.scenario_files import load_scenario
-from trustfg.fleet import netem
-from trustfg.fleet.launch import START_LEAD_S, RunContext, free_port, loopback_fleet, run
+from ..agent.scenario_files import load_scenario
+from . import netem
+from .launch import START_LEAD_S, RunContext, free_port, loopback_fleet, run
 
 SCENARIO = "intersection"
 VICTIM = 2

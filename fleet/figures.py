@@ -22,9 +22,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from trustfg.agent import metrics  # noqa: E402
-from trustfg.agent.config import Scenario  # noqa: E402
-from trustfg.fleet.fleet_sim import RunRecord  # noqa: E402
+from ..agent import metrics  # noqa: E402
+from ..agent.config import Scenario  # noqa: E402
+from .fleet_sim import RunRecord  # noqa: E402
 
 
 def draw_world(ax, scenario: Scenario) -> None:

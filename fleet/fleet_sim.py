@@ -20,14 +20,14 @@ import math
 
 import numpy as np
 
-from trustfg.agent import messages
-from trustfg.agent.car_agent import CarAgent
-from trustfg.agent.config import Scenario
-from trustfg.agent.vehicle import VehicleState
-from trustfg.agent.vehicle import step as vehicle_step
-from trustfg.agent.world import SignedDistanceField, build_sdf
-from trustfg.bridge.tracking import track
-from trustfg.fleet.runs import RunRecord
+from ..agent import messages
+from ..agent.car_agent import CarAgent
+from ..agent.config import Scenario
+from ..agent.vehicle import VehicleState
+from ..agent.vehicle import step as vehicle_step
+from ..agent.world import SignedDistanceField, build_sdf
+from ..bridge.tracking import track
+from .runs import RunRecord
 
 RECORD_TRUST_PERIOD_S = 0.1
 

@@ -13,10 +13,10 @@ import sys
 import threading
 import time
 
-from trustfg.agent import messages
-from trustfg.agent.scenario_files import load_scenario
-from trustfg.fleet.bus import BusError, FleetBus
-from trustfg.fleet.command import configured, stop_on_signals
+from ..agent import messages
+from ..agent.scenario_files import load_scenario
+from .bus import BusError, FleetBus
+from .command import configured, stop_on_signals
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -44,16 +44,16 @@ from typing import Callable
 
 import numpy as np
 
-from trustfg.agent import messages
-from trustfg.agent.config import ConfigError, Scenario
-from trustfg.agent.scenario_files import dump_scenario, load_scenario
-from trustfg.agent.world import build_sdf
-from trustfg.bridge import natnet
-from trustfg.fleet.bus import FleetBus
-from trustfg.fleet.command import configured, stop_on_signals
-from trustfg.fleet.fleet_sim import draw_departures
-from trustfg.fleet.recording import convert_run
-from trustfg.fleet.runs import RunRecord, arrivals, motion_summary
+from ..agent import messages
+from ..agent.config import ConfigError, Scenario
+from ..agent.scenario_files import dump_scenario, load_scenario
+from ..agent.world import build_sdf
+from ..bridge import natnet
+from .bus import FleetBus
+from .command import configured, stop_on_signals
+from .fleet_sim import draw_departures
+from .recording import convert_run
+from .runs import RunRecord, arrivals, motion_summary
 
 log = logging.getLogger(__name__)
 

@@ -21,12 +21,12 @@ from pathlib import Path
 from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
 
-from trustfg.agent import messages
-from trustfg.agent.config import Scenario
-from trustfg.agent.scenario_files import dump_scenario, load_scenario, scenario_from_dict
-from trustfg.fleet import keys
-from trustfg.fleet.bus import FleetBus
-from trustfg.fleet.command import configured, stop_on_signals
+from ..agent import messages
+from ..agent.config import Scenario
+from ..agent.scenario_files import dump_scenario, load_scenario, scenario_from_dict
+from . import keys
+from .bus import FleetBus
+from .command import configured, stop_on_signals
 
 NUMBER = {"type": "number"}
 INTEGER = {"type": "integer"}

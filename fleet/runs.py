@@ -12,9 +12,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from trustfg.agent import metrics
-from trustfg.agent.config import Scenario
-from trustfg.agent.world import SignedDistanceField
+from ..agent import metrics
+from ..agent.config import Scenario
+from ..agent.world import SignedDistanceField
 
 
 @dataclass

@@ -29,7 +29,7 @@ import json
 import sys
 from pathlib import Path
 
-from trustfg.fleet import keys
+from . import keys
 
 ALL_MESSAGES = ["put", "delete", "declare_subscriber", "query", "declare_queryable", "reply",
                 "liveliness_token", "declare_liveliness_subscriber", "liveliness_query"]

@@ -51,9 +51,9 @@ from typing import Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
-from trustfg.agent.config import NatNetConfig
-from trustfg.bridge import natnet
-from trustfg.bridge.natnet import (
+from ..agent.config import NatNetConfig
+from ..bridge import natnet
+from ..bridge.natnet import (
     ConnectionInfo,
     Frame,
     MarkerSetDescription,

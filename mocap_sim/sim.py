@@ -43,14 +43,14 @@ from pathlib import Path
 
 import numpy as np
 
-from trustfg.agent.config import ConfigError, Scenario, parse_udp_address
-from trustfg.agent.scenario_files import load_scenario
-from trustfg.agent.vehicle import VehicleState, step
-from trustfg.bridge import natnet
-from trustfg.bridge.carlink import CommandReceiver
-from trustfg.fleet.command import configured, stop_on_signals
-from trustfg.fleet.ticker import ticks
-from trustfg.mocap_sim.natnet_server import NatNetServer, NatNetServerOptions, Occlusion
+from ..agent.config import ConfigError, Scenario, parse_udp_address
+from ..agent.scenario_files import load_scenario
+from ..agent.vehicle import VehicleState, step
+from ..bridge import natnet
+from ..bridge.carlink import CommandReceiver
+from ..fleet.command import configured, stop_on_signals
+from ..fleet.ticker import ticks
+from .natnet_server import NatNetServer, NatNetServerOptions, Occlusion
 
 log = logging.getLogger(__name__)
 

@@ -15,7 +15,7 @@ Imports point one way: ``receiver`` and ``link`` use ``codec``, ``link`` uses ``
 Everything public is re-exported here, so callers import from ``trustfg.bridge.carlink``.
 """
 
-from trustfg.bridge.carlink.codec import (
+from .codec import (
     DATAGRAM_SIZE,
     MAGIC,
     SEQ_MODULUS,
@@ -27,13 +27,13 @@ from trustfg.bridge.carlink.codec import (
     encode_command,
     seq_after,
 )
-from trustfg.bridge.carlink.link import (
+from .link import (
     Clock,
     CommandReceiver,
     CommandSender,
     SenderStats,
 )
-from trustfg.bridge.carlink.receiver import (
+from .receiver import (
     DEFAULT_RESYNC_AFTER_S,
     DEFAULT_WATCHDOG_TIMEOUT_S,
     CommandFilter,

@@ -22,8 +22,8 @@ import time
 from dataclasses import dataclass
 from typing import Callable
 
-from trustfg.bridge.carlink.codec import SEQ_MODULUS, Command, Flags, _check_int, encode_command
-from trustfg.bridge.carlink.receiver import (
+from .codec import SEQ_MODULUS, Command, Flags, _check_int, encode_command
+from .receiver import (
     DEFAULT_RESYNC_AFTER_S,
     DEFAULT_WATCHDOG_TIMEOUT_S,
     CommandFilter,

@@ -32,7 +32,7 @@ from collections import Counter
 from dataclasses import dataclass, field
 from typing import Mapping
 
-from trustfg.bridge.carlink.codec import CarLinkError, Command, _check_int, decode_command, seq_after
+from .codec import CarLinkError, Command, _check_int, decode_command, seq_after
 
 log = logging.getLogger(__name__)
 
