@@ -31,7 +31,7 @@ from typing import Callable
 import numpy as np
 
 from ..agent import metrics
-from ..agent.config import Scenario
+from ..agent.config import AttackConfig, Scenario
 from ..agent.scenario_files import load_scenario
 from ..agent.world import build_sdf
 from .command import configured
@@ -52,9 +52,13 @@ def factors(scenario: Scenario, **switches: bool) -> Scenario:
 
 def with_liar(scenario: Scenario, liar: int = LIAR_ID, p: float = LIAR_MISINFORMATION) -> Scenario:
     """Car ``liar`` publishes falsified plans in a fraction p of messages and lies in its
-    testimonies."""
-    cars = tuple(dataclasses.replace(c, misinformation=p, false_testimony=True) if c.id == liar else c
-                 for c in scenario.cars)
+    testimonies (the paper's liar: attacks ``displaced+false-testimony``)."""
+    return with_attack(scenario, {liar: AttackConfig("displaced+false-testimony", {"p": p})})
+
+
+def with_attack(scenario: Scenario, attacks: dict[int, AttackConfig]) -> Scenario:
+    """The scenario with car ``id`` running ``attacks[id]`` (others as they were)."""
+    cars = tuple(dataclasses.replace(c, attack=attacks[c.id]) if c.id in attacks else c for c in scenario.cars)
     return dataclasses.replace(scenario, cars=cars)
 
 
@@ -115,15 +119,18 @@ def summarise(scenario: Scenario, record: RunRecord) -> dict:
         if any(record.replan_ms) else None,
     }
     if "liar_id" in run:
-        liar = record.car_ids.index(run["liar_id"])
+        liars = [record.car_ids.index(i) for i in run["liar_ids"]]
         honest = [record.car_ids.index(i) for i in run["honest_ids"]]
         after = record.trust_times >= TRUST_SETTLE_S
         honest_pairs = [record.trust[after][:, a, b] for a in honest for b in honest if a != b]
         run["honest_trust_min_after_settle"] = round(float(np.min(honest_pairs)), 4) if honest_pairs else None
         gaps = [record.trust[after][:, a, [b for b in honest if b != a]].min(axis=1) - record.trust[after][:, a, liar]
-                for a in honest]
+                for a in honest for liar in liars]
         run["trust_gap_min_after_settle"] = round(float(np.min(gaps)), 4)
-        run["trust_separated_at_s"] = metrics.trust_separation(record.trust_times, record.trust, liar, honest, TRUST_GAP)
+        separated = [metrics.trust_separation(record.trust_times, record.trust, liar, honest, TRUST_GAP) for liar in liars]
+        detected = [metrics.trust_detection(record.trust_times, record.trust, liar, honest, TRUST_GAP) for liar in liars]
+        run["trust_separated_at_s"] = None if None in separated else max(separated)
+        run["trust_detected_at_s"] = None if None in detected else max(detected)
     return run
 
 

@@ -4,8 +4,12 @@ Every car is a :class:`CarAgent` (the same planner and trust code the car proces
 driving a simulated unicycle (agent.vehicle) with the tracking controller of the
 bridge (bridge.tracking). Cars see each other through noisy pose observations and talk
 through the fleet message codec (agent.messages: msgpack bytes, decoded and filtered by
-an Inbox per receiver), with a fixed message latency. Time is simulated: a replan takes
-no simulated time, so a run is exactly repeatable from its seed.
+an Inbox per receiver), with a message latency (``sim.message_latency_s`` +-
+``sim.message_jitter_s``, in order per link) and loss (``sim.message_loss``) drawn per
+receiver. Time is simulated: a replan takes no simulated time, so a run is exactly
+repeatable from its seed. A car with ``clock_offset_s`` reads every time off its own
+clock, that much ahead of the fleet's: its observations, stamps, departure and plan
+tracking, as a car computer with a wrong clock would.
 
 Per seed, each car draws a start delay in [0, start_delay_max_s], a cruise speed in
 cruise_speed_range_mps (:func:`draw_departures`, which ``trustfg sim`` uses too) and a
@@ -64,13 +68,23 @@ def simulate(scenario: Scenario, seed: int, sdf: SignedDistanceField | None = No
     inboxes = [messages.Inbox() for _ in cars]
     vehicles = [VehicleState(c.start[0], c.start[1], c.start_heading) for c in cars]
 
-    queue: list[tuple[float, int, int, bytes]] = []  # (deliver_at, order, sender index, payload)
+    clock = np.array([c.clock_offset_s for c in cars])  # each car's clock minus the fleet's
+    link_rng = np.random.default_rng([seed, 11])
+    queue: list[tuple[float, int, int, int, bytes]] = []  # (deliver_at, order, sender, receiver, payload)
+    link_free = np.zeros((n, n))  # a link never reorders: the last delivery time per (sender, receiver)
     order = 0
 
     def publish(sender: int, message: messages.Message, now: float) -> None:
         nonlocal order
-        heapq.heappush(queue, (now + sim.message_latency_s, order, sender, messages.encode(message)))
-        order += 1
+        payload = messages.encode(message)
+        for receiver in range(n):
+            if receiver == sender or (sim.message_loss > 0.0 and link_rng.random() < sim.message_loss):
+                continue
+            jitter = link_rng.uniform(-sim.message_jitter_s, sim.message_jitter_s) if sim.message_jitter_s else 0.0
+            deliver = max(now + sim.message_latency_s + jitter, link_free[sender, receiver])
+            link_free[sender, receiver] = deliver
+            heapq.heappush(queue, (deliver, order, sender, receiver, payload))
+            order += 1
 
     steps = int(math.ceil(sim.timeout_s / step_s)) + 1
     times, states = [], []
@@ -84,37 +98,35 @@ def simulate(scenario: Scenario, seed: int, sdf: SignedDistanceField | None = No
     for k in range(steps):
         t = k * step_s
         # 1. Deliver due messages through each receiver's inbox (decode + order/replay filter).
+        own = t + clock  # every car's own reading of the time
         while queue and queue[0][0] <= t + 1e-9:
-            _, _, sender, payload = heapq.heappop(queue)
-            for j, agent in enumerate(agents):
-                if j == sender:
-                    continue
-                message = inboxes[j].accept(payload, key_sender=ids[sender])
-                if message is not None:
-                    agent.receive(message, t)
+            _, _, sender, j, payload = heapq.heappop(queue)
+            message = inboxes[j].accept(payload, key_sender=ids[sender])
+            if message is not None:
+                agents[j].receive(message, own[j])
         # 2. Everyone sees everyone (mocap), with noise.
         for i, state in enumerate(vehicles):
             noisy = noise_rng.normal(0.0, sim.observation_noise_m, (n, 2))
             for j, agent in enumerate(agents):
-                agent.observe(t, ids[i], state.x + noisy[j, 0], state.y + noisy[j, 1], state.yaw)
+                agent.observe(own[j], ids[i], state.x + noisy[j, 0], state.y + noisy[j, 1], state.yaw)
         # 3. Evidence, replanning, reports.
         for i, agent in enumerate(agents):
-            agent.gather_evidence(t)
+            agent.gather_evidence(own[i])
             if t + 1e-9 >= next_replan[i]:
                 next_replan[i] += control.replan_period_s
-                agent.replan(t)
+                agent.replan(own[i])
                 if keep_plans and agent.plan is not None:
                     plan_log.append((t, i, agent.plan))
-                outgoing = agent.plan_message(t)
+                outgoing = agent.plan_message(own[i])
                 if outgoing is not None:
                     publish(i, outgoing, t)
             if t + 1e-9 >= next_report[i]:
                 next_report[i] += control.trust_report_period_s
-                publish(i, agent.trust_message(t), t)
+                publish(i, agent.trust_message(own[i]), t)
         if t + 1e-9 >= next_trust_record:
             next_trust_record += RECORD_TRUST_PERIOD_S
             trust_times.append(t)
-            tr, tp, ep = _trust_snapshot(agents, ids, t)
+            tr, tp, ep = _trust_snapshot(agents, ids, own)
             trust_rows.append(tr)
             transparency_rows.append(tp)
             epsilon_rows.append(ep)
@@ -125,11 +137,11 @@ def simulate(scenario: Scenario, seed: int, sdf: SignedDistanceField | None = No
             state = vehicles[i]
             if arrived[i] is None and math.hypot(state.x - cars[i].goal[0], state.y - cars[i].goal[1]) <= scenario.arrival_radius_m:
                 arrived[i] = t
-            if t < depart[i] or agent.plan is None or agent.at_goal:
+            if own[i] < depart[i] or agent.plan is None or agent.at_goal:
                 v_cmd, w_cmd = 0.0, 0.0
             else:
-                own = agent.tracks[ids[i]].motion()
-                v_cmd, w_cmd = track(agent.plan, t, own.position[0], own.position[1], own.yaw,
+                seen = agent.tracks[ids[i]].motion()
+                v_cmd, w_cmd = track(agent.plan, own[i], seen.position[0], seen.position[1], seen.yaw,
                                      scenario.tracking, scenario.vehicle)
             vehicles[i] = vehicle_step(state, v_cmd, w_cmd, step_s, scenario.vehicle)
         if all(a is not None for a in arrived) and all(abs(s.v) < 1e-3 for s in vehicles):
@@ -148,7 +160,8 @@ def simulate(scenario: Scenario, seed: int, sdf: SignedDistanceField | None = No
         transparency=np.array(transparency_rows),
         epsilon=np.array(epsilon_rows),
         replan_ms=[list(a.replan_ms) for a in agents],
-        counters=[dict(a.counters) | {f"trust_{k}": v for k, v in a.trust.counters.items()} for a in agents],
+        counters=[dict(a.counters) | {f"trust_{k}": v for k, v in a.trust.counters.items()}
+                  | ({f"attack_{k}": v for k, v in a.liar.counters.items()} if a.liar else {}) for a in agents],
         inbox=[dict(box.dropped) | {f"accepted_{k}": v for k, v in box.accepted.items()} for box in inboxes],
         final_plans=[(a.plan.positions.copy(), a.plan.velocities.copy()) if a.plan is not None else
                      (np.zeros((0, 2)), np.zeros((0, 2))) for a in agents],
@@ -156,19 +169,19 @@ def simulate(scenario: Scenario, seed: int, sdf: SignedDistanceField | None = No
     )
 
 
-def _trust_snapshot(agents: list[CarAgent], ids: list[int], t: float):
+def _trust_snapshot(agents: list[CarAgent], ids: list[int], own: np.ndarray):
     n = len(agents)
     trust = np.ones((n, n))
     transparency = np.ones((n, n))
     epsilon = np.zeros((n, n))
     for a, agent in enumerate(agents):
-        planner = agent.scenario.planner
+        t = float(own[a])
         for b, peer in enumerate(ids):
             if a == b:
                 continue
             tau = agent.trust.tau(peer, t)
             trust[a, b] = float(np.min(tau))
             transparency[a, b] = float(tau[2])
-            epsilon[a, b] = agent.trust.epsilon(peer, t, agent.epsilon_0(peer), planner.transparency)
+            epsilon[a, b] = agent.trust.epsilon(peer, t, agent.epsilon_0(peer), agent.scenario.planner)
     return trust, transparency, epsilon
 

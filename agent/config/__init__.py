@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from .attacks import ATTACKS, AttackConfig, parse_attack
 from .checks import ConfigError, parse_udp_address, positive, with_overrides
 from .planning import PlannerConfig, TrustConfig
 from .running import BusConfig, ControlConfig, GuardConfig, NatNetConfig, TrackingConfig, VehicleConfig
@@ -23,6 +24,7 @@ __all__ = [
     "ConfigError", "parse_udp_address", "positive", "with_overrides", "PlannerConfig", "TrustConfig",
     "BusConfig", "ControlConfig", "GuardConfig", "NatNetConfig", "TrackingConfig", "VehicleConfig",
     "CarConfig", "Obstacle", "SafetyConfig", "SimConfig", "WorldConfig", "Scenario", "PALETTE",
+    "ATTACKS", "AttackConfig", "parse_attack",
 ]
 
 
@@ -59,6 +61,18 @@ class Scenario:
             raise ConfigError(f"{prefix}cars: rigid-body ids must be unique, got {bodies}")
         for name in ("world", "safety", "planner", "trust", "vehicle", "tracking", "guard", "sim", "control", "bus", "natnet"):
             getattr(self, name).validate(prefix + name)
+        if self.safety.peer_margin_m < self.trust.transparency_tolerance_m:
+            # A liar can bias its plans by anything under the tolerance unnoticed (it reads
+            # as pose noise); the margin every plan keeps beyond the breach distance must
+            # cover that bias, or an undetectable lie could lead a peer into a breach.
+            raise ConfigError(f"{prefix}safety.peer_margin_m ({self.safety.peer_margin_m}) must be at least "
+                              f"trust.transparency_tolerance_m ({self.trust.transparency_tolerance_m}): the margin "
+                              "must cover what a liar can bias its plans by unnoticed")
+
+    @property
+    def liars(self) -> list[int]:
+        """Ids of the cars that run an attack."""
+        return [car.id for car in self.cars if car.attack is not None]
 
     def car(self, car_id: int) -> CarConfig:
         for car in self.cars:

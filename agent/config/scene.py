@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from .attacks import AttackConfig
 from .checks import ConfigError, parse_udp_address, positive
 
 
@@ -62,11 +63,12 @@ class CarConfig:
     """Heading at the start; default: towards the first via point (or the goal)."""
     radius_m: float = 0.1
     color: str = ""
-    misinformation: float = 0.0
-    """Fraction of this car's plan messages that are falsified (see agent.misbehaviour)."""
-    false_testimony: bool = False
-    """If true, this car's trust reports lie: they swap success and failure evidence
-    about every peer (see agent.misbehaviour)."""
+    attack: AttackConfig | None = None
+    """How this car lies (experiments only; agent.attacks, config.attacks); none: honest."""
+    clock_offset_s: float = 0.0
+    """Simulation and tests only: this car's clock runs this far ahead of the fleet's (both
+    simulations add it to every time the car reads). In the lab a clock is what NTP makes
+    it, and this stays 0."""
     rigid_body: int = 0
     """Its NatNet rigid-body id in Motive; 0 means the same as ``id``."""
     link: str = ""
@@ -96,8 +98,10 @@ class CarConfig:
         if self.link:
             parse_udp_address(self.link, f"{path}.link")
         positive(self.radius_m, f"{path}.radius_m")
-        if not 0.0 <= self.misinformation <= 1.0:
-            raise ConfigError(f"{path}.misinformation: must be within [0, 1]")
+        if self.attack is not None:
+            self.attack.validate(f"{path}.attack")
+        if not abs(self.clock_offset_s) <= 60.0:
+            raise ConfigError(f"{path}.clock_offset_s: must be within [-60, 60] s")
 
 
 @dataclass(frozen=True)
@@ -148,6 +152,11 @@ class SimConfig:
 
     observation_noise_m: float = 0.002
     message_latency_s: float = 0.02
+    message_jitter_s: float = 0.0
+    """In-process fleet: each message's latency is message_latency_s +- U(this), per
+    receiver; a link never reorders (like TCP, and the fault lab's delay relay)."""
+    message_loss: float = 0.0
+    """In-process fleet: the fraction of messages lost, drawn per message and receiver."""
     timeout_s: float = 45.0
     start_delay_max_s: float = 2.0
     """Each car waits U(0, this) before it moves: desynchronised starts per seed. On the
@@ -161,6 +170,10 @@ class SimConfig:
         positive(self.timeout_s, f"{path}.timeout_s")
         if self.observation_noise_m < 0 or self.message_latency_s < 0 or self.start_delay_max_s < 0:
             raise ConfigError(f"{path}: noise, latency and delay must be >= 0")
+        if not 0.0 <= self.message_jitter_s <= self.message_latency_s:
+            raise ConfigError(f"{path}.message_jitter_s: must be within [0, message_latency_s]")
+        if not 0.0 <= self.message_loss < 1.0:
+            raise ConfigError(f"{path}.message_loss: must be within [0, 1)")
         lo, hi = self.cruise_speed_range_mps
         if not 0 < lo <= hi:
             raise ConfigError(f"{path}.cruise_speed_range_mps: need 0 < low <= high")

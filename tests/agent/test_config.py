@@ -49,7 +49,11 @@ def test_defaults_fill_what_a_file_leaves_out():
                             {"id": 1, "start": [0, 1], "goal": [1, 0]}]}, "car ids must be unique"),
     ({"name": "t", "cars": []}, "cars: a scenario needs at least one car"),
     ({"cars": [{"id": 1, "start": [0, 0], "goal": [1, 1]}]}, "name: missing required key"),
-    (minimal(cars=[{"id": 1, "start": [0, 0], "goal": [1, 1], "misinformation": 2.0}]), "misinformation"),
+    (minimal(cars=[{"id": 1, "start": [0, 0], "goal": [1, 1], "attack": {"name": "displaced", "params": {"p": 2.0}}}]),
+     "attack.params.p"),
+    (minimal(cars=[{"id": 1, "start": [0, 0], "goal": [1, 1], "attack": {"name": "nonsense"}}]), "attack.name"),
+    (minimal(cars=[{"id": 1, "start": [0, 0], "goal": [1, 1], "attack": {"name": "bias", "params": {"p": 0.5}}}]),
+     "attack.params.p"),
 ])
 def test_bad_config_names_the_key(data, message):
     with pytest.raises(ConfigError) as info:

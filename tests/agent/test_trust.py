@@ -1,9 +1,9 @@
 import numpy as np
 import pytest
 
-from trustfg.agent.config import TrustConfig
+from trustfg.agent.attacks import Liar
+from trustfg.agent.config import AttackConfig, TrustConfig
 from trustfg.agent.messages import PeerTrust, TrustReport
-from trustfg.agent.misbehaviour import falsify_testimony
 from trustfg.agent.trust import TRANSPARENCY, TrustBook, epsilon_gain, expected, graded
 
 
@@ -106,7 +106,7 @@ def test_lying_testimonies_do_not_sink_an_honest_peer():
         book.record(3, TRANSPARENCY, 0.0, 1.0, 4.0 + 0.1 * k)
     now = 8.0
     honest = TrustReport(2, 1, now, {4: PeerTrust((30.0,) * 3, (0.0,) * 3, (0.97,) * 3, 0.97, 0.45)})
-    slander = falsify_testimony(honest)
+    slander = Liar(3, AttackConfig("false-testimony"), np.random.default_rng(0)).testimony(honest)
     slander = TrustReport(3, 1, now, slander.peers)
     book.receive(slander)
     assert book.trust(4, now) > 0.8
