@@ -25,7 +25,7 @@ How peers' plans are used (agent.evidence; docs/architecture.md, "Trust"):
   derivative of noisy poses, and one plan for both ends keeps late or bunched messages
   from looking like erratic driving. Without a plan made within one replan period (plus
   REPLAN_MARGIN_S) of the window's start -- lost or delayed messages -- there is no
-  consistency evidence.
+  consistency evidence; a change of mind announced at once excuses what follows it.
 
 A liar (``car.attack``, agent.attacks) plans and drives like everyone else and lies in
 what it publishes.
@@ -208,12 +208,7 @@ class CarAgent:
                     self.counters["peers_unverified"] += 1  # not checked yet: not as if trusted
                     epsilon = widest
                 constraints.append((peer, PeerConstraint(plan, epsilon)))
-                if not (trust.reject_plans and self.trust.doubted(peer, now)):
-                    continue
-                # A peer whose word has failed lately is avoided both where it says it will be
-                # and where its own motion takes it: what it claims cannot move us into it.
-                self.counters["peers_doubted"] += 1
-                widest = epsilon
+                continue
             predicted = self._predict_from_observation(peer, now)
             if predicted is not None:
                 self.counters["peers_predicted"] += 1

@@ -226,13 +226,6 @@ class TrustBook:
         """Overall trust: the weakest dimension."""
         return float(np.min(self.tau(peer, now)))
 
-    def doubted(self, peer: int, now: float) -> bool:
-        """Its word has failed lately: our own transparency evidence against it (decayed)
-        holds at least one full failure (weighed ``failure_weight``)."""
-        opinion = self.opinion(peer, now)
-        self._decay(opinion, now)
-        return bool(opinion.beta[TRANSPARENCY] - self.config.prior_beta >= self.config.failure_weight)
-
     def epsilon(self, peer: int, now: float, epsilon_0: float, planner: PlannerConfig) -> float:
         """The distance to keep from ``peer``: eps_0 * g(lower bound of transparency trust)."""
         if planner.uniform_epsilon_gain > 0.0:

@@ -2,6 +2,8 @@
 
     trustfg experiment {proximity,consistency,transparency,lab,all} [--seed N] [--seeds K]
                        [--out DIR] [--jobs J]
+    trustfg experiment adversaries ...         (fleet.adversaries: every attack, three fleets)
+    trustfg experiment transparency-sweep ...  (fleet.sweep: misinformation x g_max)
 
 writes DIR/<name>/metrics.json and PNG figures and prints a table. metrics.json is
 
@@ -10,7 +12,8 @@ writes DIR/<name>/metrics.json and PNG figures and prints a table. metrics.json 
 
 with one RUN per seed (keys documented in the README). The lab experiment has a third
 variant "A" (everyone honest); its "on"/"off" are the paper's scenario B (car 1 at 40 %
-misinformation) with and without the transparency factor.
+misinformation) with trust on and with the paper's baseline ("off": no transparency factor
+and every plan believed, :func:`trust_off`).
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import functools
+import importlib
 import json
 import logging
 import os
@@ -66,6 +70,25 @@ ALL_ON = dict(proximity=True, consistency=True, transparency=True)
 ALL_OFF = dict(proximity=False, consistency=False, transparency=False)
 
 
+def trust_on(scenario: Scenario) -> Scenario:
+    """Every factor, plan rejection, the audit, epsilon from trust."""
+    return factors(scenario, **ALL_ON)
+
+
+def trust_off(scenario: Scenario) -> Scenario:
+    """The paper's baseline: no transparency factor (eps_0 for everyone) and every plan
+    believed as it comes (trust is still gathered, for the metrics)."""
+    believing = dataclasses.replace(scenario, trust=dataclasses.replace(scenario.trust, reject_plans=False))
+    return factors(believing, **(ALL_ON | dict(transparency=False)))
+
+
+def uniform_wide(scenario: Scenario) -> Scenario:
+    """No trust, but every peer kept at eps_0 * g_max: the uniformly careful fleet."""
+    off = trust_off(scenario)
+    return dataclasses.replace(off, planner=dataclasses.replace(
+        off.planner, uniform_epsilon_gain=scenario.trust.epsilon_gain_max))
+
+
 @dataclass(frozen=True)
 class Experiment:
     name: str
@@ -86,14 +109,12 @@ EXPERIMENTS = {
         "Does the consistency factor make the cars' accelerations more alike?"),
     "transparency": Experiment(
         "transparency", "lab",
-        {"on": lambda s: factors(with_liar(s), **ALL_ON),
-         "off": lambda s: factors(with_liar(s), **(ALL_ON | dict(transparency=False)))},
+        {"on": lambda s: trust_on(with_liar(s)), "off": lambda s: trust_off(with_liar(s))},
         "Do honest cars keep a wider berth from a car that publishes 40 % misinformation?"),
     "lab": Experiment(
         "lab", "lab",
         {"A": functools.partial(factors, **ALL_ON),
-         "on": lambda s: factors(with_liar(s), **ALL_ON),
-         "off": lambda s: factors(with_liar(s), **(ALL_ON | dict(transparency=False)))},
+         "on": lambda s: trust_on(with_liar(s)), "off": lambda s: trust_off(with_liar(s))},
         "The paper's lab left turns: A all honest, B car 1 at 40 % misinformation."),
 }
 
@@ -118,12 +139,12 @@ def summarise(scenario: Scenario, record: RunRecord) -> dict:
         "replan_ms_median": round(float(np.median(np.concatenate(record.replan_ms))), 2)
         if any(record.replan_ms) else None,
     }
-    if "liar_id" in run:
-        liars = [record.car_ids.index(i) for i in run["liar_ids"]]
-        honest = [record.car_ids.index(i) for i in run["honest_ids"]]
-        after = record.trust_times >= TRUST_SETTLE_S
-        honest_pairs = [record.trust[after][:, a, b] for a in honest for b in honest if a != b]
-        run["honest_trust_min_after_settle"] = round(float(np.min(honest_pairs)), 4) if honest_pairs else None
+    liars = [record.car_ids.index(i) for i in run.get("liar_ids", [])]
+    honest = [i for i in range(len(record.car_ids)) if i not in liars]
+    after = record.trust_times >= TRUST_SETTLE_S
+    honest_pairs = [record.trust[after][:, a, b] for a in honest for b in honest if a != b]
+    run["honest_trust_min_after_settle"] = round(float(np.min(honest_pairs)), 4) if honest_pairs else None
+    if liars:
         gaps = [record.trust[after][:, a, [b for b in honest if b != a]].min(axis=1) - record.trust[after][:, a, liar]
                 for a in honest for liar in liars]
         run["trust_gap_min_after_settle"] = round(float(np.min(gaps)), 4)
@@ -301,9 +322,17 @@ class Progress:
 # --- command line ------------------------------------------------------------------------------
 
 
+STUDIES = {"adversaries": "adversaries", "transparency-sweep": "sweep"}
+"""Experiments with their own options (``trustfg experiment NAME --help``), by module."""
+
+
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="trustfg experiment", description=__doc__.split("\n")[0])
-    parser.add_argument("name", choices=[*EXPERIMENTS, "all"])
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] in STUDIES:
+        return importlib.import_module(f".{STUDIES[argv[0]]}", __package__).main(argv[1:])
+    parser = argparse.ArgumentParser(prog="trustfg experiment", description=__doc__.split("\n")[0],
+                                     epilog=f"also: {', '.join(STUDIES)} (each with its own --help)")
+    parser.add_argument("name", choices=[*EXPERIMENTS, "all", *STUDIES])
     parser.add_argument("--seed", type=int, default=0, help="first seed (default 0)")
     parser.add_argument("--seeds", type=int, default=20, help="number of seeds (default 20)")
     parser.add_argument("--out", type=Path, default=None,

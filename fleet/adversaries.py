@@ -1,0 +1,157 @@
+"""``trustfg experiment adversaries``: every attack against three fleets, over many seeds.
+
+    trustfg experiment adversaries [--seeds 50] [--seed 0] [--scenes lab intersection]
+                                   [--attacks NAME ...] [--variants on off wide]
+                                   [--held-out intersection-8 --held-out-seeds 20]
+                                   [--jobs J] [--out DIR]
+
+Per scene, attack (car 1 lies; ``collude``: cars 1 and 3) and seed, the in-process fleet
+runs three ways:
+
+    on     trust on: every factor, plan rejection, the audit, epsilon from trust
+    off    the paper's baseline: trust gathered but not used, every plan believed, eps_0
+    wide   a uniformly careful fleet: every plan believed, every peer at eps_0 * g_max
+
+and each cell (scene, attack, variant) is summarised by fleet.stats.cell with 95 %
+bootstrap intervals: honest-liar breaches, least clearance, detection time, false
+positives, makespan. Held-out scenes (not looked at while the defences were built) run
+``on`` only and are reported apart. Writes DIR/adversaries/metrics.json and table.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import os
+import time
+from pathlib import Path
+
+from ..agent.config import AttackConfig, Scenario
+from ..agent.scenario_files import load_scenario
+from . import stats
+from .experiments import Progress, _pool, run_one, trust_off, trust_on, uniform_wide, with_attack
+
+LIAR = 1
+PARTNER = 3
+
+ATTACKS: dict[str, dict[int, AttackConfig]] = {
+    "displaced": {LIAR: AttackConfig("displaced")},
+    "forged-future": {LIAR: AttackConfig("forged-stamp", {"shift_s": 0.2})},
+    "forged-past": {LIAR: AttackConfig("forged-stamp", {"shift_s": -0.2})},
+    "bias": {LIAR: AttackConfig("bias")},
+    "false-future": {LIAR: AttackConfig("false-future")},
+    "false-yield": {LIAR: AttackConfig("false-yield")},
+    "on-off": {LIAR: AttackConfig("on-off")},
+    "replay": {LIAR: AttackConfig("replay")},
+    "false-testimony": {LIAR: AttackConfig("false-testimony")},
+    "slander": {LIAR: AttackConfig("slander")},
+    "praise": {LIAR: AttackConfig("praise")},
+    "framing": {LIAR: AttackConfig("framing")},
+    "collude": {LIAR: AttackConfig("collude"), PARTNER: AttackConfig("collude")},
+}
+"""The attacks of the table, by label: which car runs which attack (config.attacks)."""
+
+PLAN_LIES = ("displaced", "forged-future", "forged-past", "false-future", "false-yield", "on-off", "replay",
+             "collude")
+"""Attacks whose false claims exceed the transparency tolerance somewhere in the plan (the
+acceptance's "detected within 3 s"); the others are bounded otherwise (README)."""
+
+
+VARIANTS = {"on": trust_on, "off": trust_off, "wide": uniform_wide}
+
+
+def run_summary(args: tuple[Scenario, int]) -> dict:
+    """One seed of one fleet, summarised (a RUN dict; the record is dropped to save memory)."""
+    scenario, seed = args
+    run, _ = run_one(scenario, seed)
+    return run
+
+
+def run_matrix(scenes: list[str], attacks: list[str], variants: list[str], seeds: list[int], jobs: int,
+               label: str = "adversaries") -> dict:
+    """{scene: {attack: {variant: [RUN, ...]}}} over every combination."""
+    tasks = []
+    for scene in scenes:
+        base = load_scenario(scene)
+        for attack in attacks:
+            attacked = with_attack(base, ATTACKS[attack])
+            for variant in variants:
+                made = VARIANTS[variant](attacked)
+                tasks.extend((scene, attack, variant, made, seed) for seed in seeds)
+    results: dict = {}
+    progress = Progress(label, len(tasks))
+    with _pool(jobs) as pool:
+        futures = [(scene, attack, variant, seed, pool.submit(run_summary, (made, seed)))
+                   for scene, attack, variant, made, seed in tasks]
+        for scene, attack, variant, seed, future in futures:
+            run = future.result()
+            results.setdefault(scene, {}).setdefault(attack, {}).setdefault(variant, []).append(run)
+            progress.step(f"{scene} {attack} {variant} seed {seed}: liar clearance {run['liar_min_clearance']:.3f} m")
+    progress.done()
+    return results
+
+
+def summarise(results: dict) -> dict:
+    return {scene: {attack: {variant: stats.cell(runs) for variant, runs in by_variant.items()}
+                    for attack, by_variant in by_attack.items()}
+            for scene, by_attack in results.items()}
+
+
+def table(summary: dict, title: str) -> str:
+    """A markdown table: one row per scene, attack and variant."""
+    lines = [f"#### {title}", "",
+             "| scene | attack | fleet | honest-liar breaches (seeds) | least clearance (m) | "
+             "detected within 3 s | detection (s), median | false positives | makespan (s), median |",
+             "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+    for scene, by_attack in summary.items():
+        for attack, by_variant in by_attack.items():
+            for variant, c in by_variant.items():
+                never = f" ({c['never_detected']} never)" if c["never_detected"] else ""
+                stuck = c["runs"] - c["all_arrived"]
+                late = f" ({stuck} not all arrived)" if stuck else ""
+                lines.append(
+                    f"| {scene} | {attack} | {variant} | {c['breach_seeds']}/{c['runs']} "
+                    f"({stats.show(c['breach_rate'], 0, True)}) | {c['min_clearance_m']:.3f} | "
+                    f"{stats.show(c['detected_3s_rate'], 0, True)} | {stats.show(c['detection_s'], 1)}{never} | "
+                    f"{stats.show(c['false_positive_rate'], 0, True)} | {stats.show(c['makespan_s'], 1)}{late} |")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="trustfg experiment adversaries", description=__doc__.split("\n")[0])
+    parser.add_argument("--seed", type=int, default=0, help="first seed (default 0)")
+    parser.add_argument("--seeds", type=int, default=50, help="seeds per cell (default 50)")
+    parser.add_argument("--scenes", nargs="+", default=["lab", "intersection"], help="scenes (default: lab intersection)")
+    parser.add_argument("--attacks", nargs="+", choices=list(ATTACKS), default=list(ATTACKS), metavar="ATTACK",
+                        help=f"attacks (default: all: {', '.join(ATTACKS)})")
+    parser.add_argument("--variants", nargs="+", choices=list(VARIANTS), default=list(VARIANTS),
+                        help="fleets (default: on off wide)")
+    parser.add_argument("--held-out", nargs="*", default=["intersection-8"],
+                        help="scenes run with trust on only and reported apart (default: intersection-8)")
+    parser.add_argument("--held-out-seeds", type=int, default=20, help="seeds per held-out cell (default 20)")
+    parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="parallel simulations (default: one per core)")
+    parser.add_argument("--out", type=Path, default=None, help="output folder (default runs/experiment-<time>)")
+    args = parser.parse_args(argv)
+    if args.seeds < 1 or args.held_out_seeds < 1:
+        parser.error("--seeds and --held-out-seeds must be at least 1")
+    out = (args.out or Path("runs") / time.strftime("experiment-%Y%m%d-%H%M%S")) / "adversaries"
+    out.mkdir(parents=True, exist_ok=True)
+    started = time.perf_counter()
+    seeds = list(range(args.seed, args.seed + args.seeds))
+    results = run_matrix(args.scenes, args.attacks, args.variants, seeds, args.jobs)
+    held = list(range(args.seed, args.seed + args.held_out_seeds))
+    held_results = run_matrix(args.held_out, args.attacks, ["on"], held, args.jobs, "held-out") if args.held_out else {}
+    report = {"experiment": "adversaries", "seeds": seeds, "held_out_seeds": held, "liar": LIAR, "partner": PARTNER,
+              "attacks": {a: {str(car): dataclasses.asdict(c) for car, c in ATTACKS[a].items()} for a in args.attacks},
+              "summary": summarise(results), "held_out": summarise(held_results),
+              "runs": results, "held_out_runs": held_results,
+              "wall_time_s": round(time.perf_counter() - started, 1)}
+    (out / "metrics.json").write_text(json.dumps(report, indent=1))
+    text = table(report["summary"], f"{len(seeds)} seeds per cell")
+    if held_results:
+        text += "\n" + table(report["held_out"], f"held out: trust on, {len(held)} seeds per cell")
+    (out / "table.md").write_text(text)
+    print(text)
+    print(f"wrote {out.resolve()} in {report['wall_time_s']:.0f} s")
+    return 0

@@ -1,0 +1,94 @@
+"""Summaries of many seeds with 95 % confidence intervals (seeded percentile bootstrap).
+
+A cell of an experiment's table is the runs of one (scene, attack, variant) over many
+seeds; :func:`cell` reduces them to the numbers the tables print, each with its interval:
+
+    breach_rate       seeds in which an honest car and a liar breached the clearance
+    min_clearance_m   least honest-liar clearance over all seeds (edge to edge); and its median
+    detected_3s_rate  seeds in which trust separated the liar within 3 s (see experiments)
+    detection_s       median time until every honest car trusts the liar 0.2 below every
+                      honest peer (seeds where that never happens are left out, counted apart)
+    false_positive_rate  seeds in which an honest car's trust in an honest peer fell below 0.8
+                      after the first 3 s
+    makespan_s        median time at which the last car arrived (runs where all arrived)
+
+Intervals: 2000 resamples of the seeds with a fixed generator, so a rerun prints the same.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+
+import numpy as np
+
+RESAMPLES = 2000
+LEVEL = 0.95
+FALSE_POSITIVE_TRUST = 0.8
+DETECTION_LIMIT_S = 3.0
+
+
+def bootstrap_ci(values: Sequence[float], statistic: Callable = np.median, seed: int = 0) -> tuple[float, float] | None:
+    """The percentile bootstrap interval of ``statistic`` (a numpy reduction taking
+    ``axis``) over ``values``; None if empty."""
+    data = np.asarray([v for v in values if v is not None], dtype=float)
+    if len(data) == 0:
+        return None
+    rng = np.random.default_rng(seed)
+    samples = rng.choice(data, size=(RESAMPLES, len(data)), replace=True)
+    stats = statistic(samples, axis=1)
+    tail = 100 * (1 - LEVEL) / 2
+    return float(np.percentile(stats, tail)), float(np.percentile(stats, 100 - tail))
+
+
+def estimate(values: Sequence[float], statistic: Callable = np.median) -> dict | None:
+    """{"value", "ci": [lo, hi], "n"} of a statistic over the non-None values."""
+    data = [v for v in values if v is not None]
+    if not data:
+        return None
+    low, high = bootstrap_ci(data, statistic)
+    return {"value": round(float(statistic(np.asarray(data, dtype=float))), 4),
+            "ci": [round(low, 4), round(high, 4)], "n": len(data)}
+
+
+def rate(flags: Sequence[bool]) -> dict:
+    """The fraction of True with its bootstrap interval."""
+    return estimate([1.0 if f else 0.0 for f in flags], np.mean) or {"value": None, "ci": None, "n": 0}
+
+
+def cell(runs: list[dict]) -> dict:
+    """The table's numbers for the runs of one cell (RUN dicts of fleet.experiments)."""
+    liar = "liar_id" in runs[0]
+    out = {
+        "runs": len(runs),
+        "breach_seeds_any": sum(1 for r in runs if r["breaches"]),
+        "all_arrived": sum(1 for r in runs if all(r["reached_goal"])),
+        "makespan_s": estimate([r["makespan_s"] for r in runs]),
+    }
+    if not liar:
+        return out
+    detected = [r.get("trust_detected_at_s") for r in runs]
+    out |= {
+        "breach_rate": rate([bool(r["liar_breaches"]) for r in runs]),
+        "breach_seeds": sum(1 for r in runs if r["liar_breaches"]),
+        "min_clearance_m": round(min(r["liar_min_clearance"] for r in runs), 4),
+        "median_clearance_m": estimate([r["liar_min_clearance"] for r in runs]),
+        "detected_3s_rate": rate([d is not None and d <= DETECTION_LIMIT_S for d in detected]),
+        "detection_s": estimate(detected),
+        "never_detected": sum(1 for d in detected if d is None),
+        "false_positive_rate": rate([r["honest_trust_min_after_settle"] is not None
+                                     and r["honest_trust_min_after_settle"] < FALSE_POSITIVE_TRUST for r in runs]),
+        "honest_trust_min": round(min(r["honest_trust_min_after_settle"] for r in runs
+                                      if r["honest_trust_min_after_settle"] is not None), 4),
+        "liar_distance_m": estimate([d for r in runs for d in r["liar_min_distance"]]),
+    }
+    return out
+
+
+def show(estimated: dict | None, digits: int = 2, percent: bool = False) -> str:
+    """``value [lo, hi]`` for a table."""
+    if not estimated or estimated.get("value") is None:
+        return "-"
+    scale = 100.0 if percent else 1.0
+    unit = " %" if percent else ""
+    value, (low, high) = estimated["value"] * scale, estimated["ci"]
+    return f"{value:.{digits}f} [{low * scale:.{digits}f}, {high * scale:.{digits}f}]{unit}"

@@ -1,0 +1,103 @@
+"""``trustfg experiment transparency-sweep``: what trust buys against a liar, and against a
+fleet that is simply careful with everyone.
+
+    trustfg experiment transparency-sweep [--seeds 30] [--seed 0] [--scene lab]
+        [--misinformation 0.05 0.1 0.2 0.4 0.6 0.8] [--gains 1.5 2 3] [--jobs J] [--out DIR]
+
+The paper's transparency experiment read one point (40 % misinformation, g_max = 2) with
+an "off" that still refused every lie (lies of 0.4-0.8 m miss by more than the 0.3 m
+rejection threshold), so its distance ratio was g_max read back. Here car 1 is the
+paper's liar (``displaced+false-testimony``) at every misinformation level p, and the
+fleet is one of
+
+    on@g    trust on, g_max = g (plans checked, rejected, audited; epsilon from trust)
+    wide@g  no trust, every plan believed, every peer at eps_0 * g (uniformly careful)
+    off     the paper's baseline: no trust, every plan believed, eps_0 for everyone
+
+Per cell: seeds with an honest-liar breach, least honest-liar clearance, median least
+distance of honest cars to the liar, false positives and makespan, with 95 % bootstrap
+intervals (fleet.stats). Writes DIR/transparency-sweep/metrics.json and table.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import os
+import time
+from pathlib import Path
+
+from ..agent.config import Scenario
+from ..agent.scenario_files import load_scenario
+from . import stats
+from .adversaries import run_summary
+from .experiments import Progress, _pool, trust_off, trust_on, uniform_wide, with_liar
+
+
+def with_gain(scenario: Scenario, gain: float) -> Scenario:
+    return dataclasses.replace(scenario, trust=dataclasses.replace(scenario.trust, epsilon_gain_max=gain))
+
+
+def fleets(gains: list[float]) -> dict:
+    """Every fleet of the sweep by label."""
+    made = {"off": trust_off}
+    for gain in gains:
+        made[f"on@{gain:g}"] = lambda s, g=gain: trust_on(with_gain(s, g))
+        made[f"wide@{gain:g}"] = lambda s, g=gain: uniform_wide(with_gain(s, g))
+    return made
+
+
+def table(summary: dict, title: str) -> str:
+    lines = [f"#### {title}", "",
+             "| misinformation | fleet | honest-liar breaches (seeds) | least clearance (m) | "
+             "distance to the liar (m), median | false positives | makespan (s), median |",
+             "| --- | --- | --- | --- | --- | --- | --- |"]
+    for p, by_fleet in summary.items():
+        for fleet, c in by_fleet.items():
+            lines.append(f"| {p} | {fleet} | {c['breach_seeds']}/{c['runs']} | {c['min_clearance_m']:.3f} | "
+                         f"{stats.show(c['liar_distance_m'])} | {stats.show(c['false_positive_rate'], 0, True)} | "
+                         f"{stats.show(c['makespan_s'], 1)} |")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="trustfg experiment transparency-sweep", description=__doc__.split("\n")[0])
+    parser.add_argument("--seed", type=int, default=0, help="first seed (default 0)")
+    parser.add_argument("--seeds", type=int, default=30, help="seeds per cell (default 30)")
+    parser.add_argument("--scene", default="lab", help="scene (default: lab, where every route crosses the liar's)")
+    parser.add_argument("--misinformation", nargs="+", type=float, default=[0.05, 0.1, 0.2, 0.4, 0.6, 0.8],
+                        help="the liar's fractions of false plans (default: 0.05 0.1 0.2 0.4 0.6 0.8)")
+    parser.add_argument("--gains", nargs="+", type=float, default=[1.5, 2.0, 3.0],
+                        help="g_max of the trust-on and uniformly wide fleets (default: 1.5 2 3)")
+    parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="parallel simulations (default: one per core)")
+    parser.add_argument("--out", type=Path, default=None, help="output folder (default runs/experiment-<time>)")
+    args = parser.parse_args(argv)
+    if args.seeds < 1 or any(not 0 < p <= 1 for p in args.misinformation) or any(g < 1 for g in args.gains):
+        parser.error("need --seeds >= 1, misinformation within (0, 1] and gains >= 1")
+    out = (args.out or Path("runs") / time.strftime("experiment-%Y%m%d-%H%M%S")) / "transparency-sweep"
+    out.mkdir(parents=True, exist_ok=True)
+    started = time.perf_counter()
+    base = load_scenario(args.scene)
+    seeds = list(range(args.seed, args.seed + args.seeds))
+    made = fleets(args.gains)
+    tasks = [(p, fleet, make(with_liar(base, p=p)), seed) for p in args.misinformation
+             for fleet, make in made.items() for seed in seeds]
+    results: dict = {}
+    progress = Progress("transparency-sweep", len(tasks))
+    with _pool(args.jobs) as pool:
+        futures = [(p, fleet, seed, pool.submit(run_summary, (scenario, seed))) for p, fleet, scenario, seed in tasks]
+        for p, fleet, seed, future in futures:
+            run = future.result()
+            results.setdefault(str(p), {}).setdefault(fleet, []).append(run)
+            progress.step(f"p {p} {fleet} seed {seed}: liar clearance {run['liar_min_clearance']:.3f} m")
+    progress.done()
+    summary = {p: {fleet: stats.cell(runs) for fleet, runs in by_fleet.items()} for p, by_fleet in results.items()}
+    report = {"experiment": "transparency-sweep", "scene": args.scene, "seeds": seeds, "summary": summary,
+              "runs": results, "wall_time_s": round(time.perf_counter() - started, 1)}
+    (out / "metrics.json").write_text(json.dumps(report, indent=1))
+    text = table(summary, f"{args.scene}, car 1 lies, {len(seeds)} seeds per cell")
+    (out / "table.md").write_text(text)
+    print(text)
+    print(f"wrote {out.resolve()} in {report['wall_time_s']:.0f} s")
+    return 0
