@@ -125,7 +125,7 @@ def audit(view: PeerView, track: Track | None, record: Record, counters: Counter
                     view.unverified = None
             elif view.unverified is plan or check.claim.stamp > view.accepted_stamp:
                 view.accept(plan, check.claim.stamp, check.claim.received)
-        elif check.rejected and (view.accepted is plan or view.unverified is plan):
+        elif check.rejected:
             counters["plans_failed_audit"] += 1  # its future did not come true: stop believing it
             if view.accepted is plan:
                 view.accepted = None

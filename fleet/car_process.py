@@ -112,12 +112,15 @@ class ControlStats:
 class CarProcess:
     """Everything one car runs; ``run()`` returns when ``stop`` is set."""
 
-    def __init__(self, scenario: Scenario, car: CarConfig, clock=time.time):
+    def __init__(self, scenario: Scenario, car: CarConfig, clock=None):
         if not car.link:
             raise ConfigError(f"cars[id={car.id}].link: a car process needs the address of its car")
         self.scenario = scenario
         self.car = car
-        self.clock = clock
+        if clock is None and car.clock_offset_s:
+            log.warning("car %d: running with a clock %+.3f s off the fleet's (clock_offset_s, for tests)",
+                        car.id, car.clock_offset_s)
+        self.clock = clock or (lambda: time.time() + car.clock_offset_s)
         self.natnet = natnet_options(scenario)
         self.stop = threading.Event()
         self.agent = CarAgent(car=car, scenario=scenario, sdf=build_sdf(scenario.world),
@@ -357,12 +360,16 @@ class CarProcess:
         counters["stale_pose_stops"] = self.control.stale_pose_stops
         counters["guard_limited"] = self.control.guard_limited
         now = self.clock()
+        if self.agent.liar is not None:
+            counters |= {f"attack_{k}": v for k, v in self.agent.liar.counters.items()}
         for peer, view in self.agent.peers.items():  # how fresh each peer's plan is, for resync checks
             counters[f"plan_age_ms_{peer}"] = int(min(1e9, max(0.0, now - view.accepted_received) * 1e3))
+        counters |= clock_counters(self.agent.clock_offsets())
+        first = ("plan_age", "clock_")
         bus.publish("status", messages.encode(messages.StatusMessage(
             self.car.id, self._seq["status"], self.clock(), self.state,
             last.time_ms if last else 0.0, last.iterations if last else 0, self.agent.at_goal,
-            dict(sorted(counters.items(), key=lambda kv: not kv[0].startswith("plan_age"))[:64]))))
+            dict(sorted(counters.items(), key=lambda kv: not kv[0].startswith(first))[:64]))))
 
     def _write_stats(self, path: Path, natnet_client: NatNetClient, bus: FleetBus,
                      sender: CommandSender) -> None:
@@ -375,6 +382,8 @@ class CarProcess:
             "control": self.control.summary(),
             "agent": dict(self.agent.counters),
             "trust": dict(self.agent.trust.counters),
+            "clock_offsets_s": {str(peer): round(offset, 4) for peer, offset in self.agent.clock_offsets().items()},
+            "attack": dict(self.agent.liar.counters) if self.agent.liar is not None else None,
             "inbox_dropped": dict(self.inbox.dropped),
             "inbox_accepted": dict(self.inbox.accepted),
             "bus": dict(bus.counters),
@@ -383,6 +392,13 @@ class CarProcess:
             "link_sent": sender.stats.sent,
         }
         path.write_text(json.dumps(stats, indent=1))
+
+
+def clock_counters(offsets: dict[int, float]) -> dict[str, int]:
+    """Peers' clock offsets as status counters (counts are >= 0): ``clock_ahead_ms_N`` or
+    ``clock_behind_ms_N``, milliseconds (dashboard.state reads them back)."""
+    return {f"clock_{'ahead' if offset >= 0 else 'behind'}_ms_{peer}": int(round(abs(offset) * 1e3))
+            for peer, offset in offsets.items()}
 
 
 def main(argv: list[str] | None = None) -> int:

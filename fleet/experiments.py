@@ -35,19 +35,18 @@ from typing import Callable
 import numpy as np
 
 from ..agent import metrics
-from ..agent.config import AttackConfig, Scenario
+from ..agent.config import PAPER_LIAR, AttackConfig, Scenario
 from ..agent.scenario_files import load_scenario
 from ..agent.world import build_sdf
 from .command import configured
 from .fleet_sim import simulate
 from .runs import RunRecord, motion_summary, rounded
+from .trust_record import TRUST_GAP, TRUST_SETTLE_S
 
 log = logging.getLogger(__name__)
 
 LIAR_ID = 1
 LIAR_MISINFORMATION = 0.4
-TRUST_GAP = 0.2
-TRUST_SETTLE_S = 3.0
 
 
 def factors(scenario: Scenario, **switches: bool) -> Scenario:
@@ -57,7 +56,7 @@ def factors(scenario: Scenario, **switches: bool) -> Scenario:
 def with_liar(scenario: Scenario, liar: int = LIAR_ID, p: float = LIAR_MISINFORMATION) -> Scenario:
     """Car ``liar`` publishes falsified plans in a fraction p of messages and lies in its
     testimonies (the paper's liar: attacks ``displaced+false-testimony``)."""
-    return with_attack(scenario, {liar: AttackConfig("displaced+false-testimony", {"p": p})})
+    return with_attack(scenario, {liar: AttackConfig(PAPER_LIAR, {"p": p})})
 
 
 def with_attack(scenario: Scenario, attacks: dict[int, AttackConfig]) -> Scenario:

@@ -1,7 +1,8 @@
 """``trustfg sim``: the main job -- a whole fleet as separate OS processes on one machine.
 
-    trustfg sim [--scenario FILE] [--cars N] [--liar ID --misinformation P] [--out DIR]
-                [--seed S] [--timeout S] [--natnet-version V] [--mocap ARG ...]
+    trustfg sim [--scenario FILE] [--cars N] [--liar ID [--attack NAME] [--attack-param K=V ...]
+                [--misinformation P]] [--clock-offset ID=S ...] [--out DIR] [--seed S] [--timeout S]
+                [--natnet-version V] [--mocap ARG ...]
 
 1. Resolves a fleet config for loopback: a free UDP port per car link and for NatNet
    (unicast), a free TCP port per process for Zenoh (explicit endpoints, multicast
@@ -45,7 +46,16 @@ from typing import Callable
 import numpy as np
 
 from ..agent import messages
-from ..agent.config import ConfigError, Scenario
+from ..agent.config import (
+    ATTACKS,
+    PAPER_LIAR,
+    AttackConfig,
+    ConfigError,
+    Scenario,
+    liar_attack,
+    parse_attack,
+    parse_id_values,
+)
 from ..agent.scenario_files import dump_scenario, load_scenario
 from ..agent.world import build_sdf
 from ..bridge import natnet
@@ -54,6 +64,7 @@ from .command import configured, stop_on_signals
 from .fleet_sim import draw_departures
 from .recording import convert_run
 from .runs import RunRecord, arrivals, motion_summary
+from .trust_record import clock_offsets, trust_over_time
 
 log = logging.getLogger(__name__)
 
@@ -73,33 +84,39 @@ def default_scenario(cars: int | None) -> str:
     return "intersection-8" if cars is not None and cars > 4 else "intersection"
 
 
-def loopback_fleet(scenario: Scenario, cars: int | None, liar: int | None, misinformation: float,
-                   infra_ip: str = "127.0.0.1", car_ips: dict[int, str] | None = None) -> Scenario:
-    """The scenario wired for one machine: ports, endpoints, unicast NatNet.
-
-    mocap-sim and the observers live at ``infra_ip``; car N's process at ``car_ips[N]``
-    (default: the same address) -- the fault tests give each its own network namespace."""
+def loopback_fleet(scenario: Scenario, cars: int | None, liar: int | list[int] | None = None,
+                   misinformation: float | None = None, infra_ip: str = "127.0.0.1",
+                   car_ips: dict[int, str] | None = None, attack: AttackConfig | None = None,
+                   clock_offsets: dict[int, float] | None = None) -> Scenario:
+    """The scenario wired for one machine: ports, endpoints, unicast NatNet. Car(s) ``liar``
+    run ``attack`` (config.liar_attack); ``clock_offsets`` give car processes clocks off
+    the fleet's (tests). mocap-sim and the observers live at ``infra_ip``; car N's process
+    at ``car_ips[N]`` (default: the same address): the fault tests give each its own netns."""
     chosen = scenario.cars if cars is None else scenario.cars[:cars]
     if cars is not None and len(chosen) < cars:
         raise ConfigError(f"the scenario has {len(scenario.cars)} cars, {cars} were asked for")
-    if liar is not None and liar not in [c.id for c in chosen]:
-        raise ConfigError(f"--liar {liar}: no such car among {[c.id for c in chosen]}")
+    liars = [] if liar is None else [liar] if isinstance(liar, int) else list(liar)
+    named = set(liars) | set(clock_offsets or {})
+    if named - {c.id for c in chosen}:
+        raise ConfigError(f"cars {sorted(named)}: not all among {[c.id for c in chosen]}")
+    lie = liar_attack(attack, misinformation) if liars else None
     wired = []
     for car in chosen:
-        lie = car.id == liar
         ip = (car_ips or {}).get(car.id, infra_ip)
         wired.append(dataclasses.replace(
             car, link=f"udp://{infra_ip}:{free_port(socket.SOCK_DGRAM)}",
             listen=(f"tcp/{ip}:{free_port()}",),
-            misinformation=misinformation if lie else car.misinformation,
-            false_testimony=lie or car.false_testimony))
+            attack=lie if car.id in liars else car.attack,
+            clock_offset_s=(clock_offsets or {}).get(car.id, car.clock_offset_s)))
     endpoints = tuple(e for car in wired for e in car.listen)
-    return dataclasses.replace(
+    fleet = dataclasses.replace(
         scenario, cars=tuple(wired),
         bus=dataclasses.replace(scenario.bus, mode="peer", listen=(), connect=endpoints, multicast_scouting=False),
         natnet=dataclasses.replace(scenario.natnet, server=infra_ip, mode="unicast",
                                    command_port=free_port(socket.SOCK_DGRAM), data_port=free_port(socket.SOCK_DGRAM),
                                    local_interface="0.0.0.0"))
+    fleet.validate()
+    return fleet
 
 
 class Processes:
@@ -167,6 +184,8 @@ class Recorder:
         self.per_sender: dict[int, Counter] = defaultdict(Counter)
         self.status: dict[int, messages.StatusMessage] = {}
         self.trust: dict[int, messages.TrustReport] = {}
+        self.trust_log: deque = deque(maxlen=200_000)
+        """(arrival, truster, trustee, overall trust) of every trust report, for the summary."""
         self.poses: dict[int, deque] = defaultdict(lambda: deque(maxlen=2))
         """The last two poses each car published (its speed, for fault schedules)."""
 
@@ -186,6 +205,8 @@ class Recorder:
                     self.poses[message.sender].append(message)
                 elif isinstance(message, messages.TrustReport):
                     self.trust[message.sender] = message
+                    self.trust_log.extend((received.at, message.sender, peer, pt.trust)
+                                          for peer, pt in message.peers.items())
             self.file.write(json.dumps(record) + "\n")
 
     def close(self) -> None:
@@ -366,7 +387,10 @@ def summarise(scenario: Scenario, out: Path, recorder: Recorder, t_go: float | N
         "control": {str(i): (stats[i] or {}).get("control") for i in ids},
         "crashed": sorted(int(name.split()[1]) for name in crashed if name.startswith("car"))
         + (["mocap-sim"] if "mocap-sim" in crashed else []),
+        "clock_offsets": clock_offsets(stats, ids),
     }
+    if t_go is not None:
+        summary |= trust_over_time(scenario, list(recorder.trust_log), t_go)
     return summary
 
 
@@ -409,7 +433,10 @@ def print_summary(summary: dict) -> None:
         f"{i}: {c['rate_hz']}/{c['jitter_ms_p99']}" if c else f"{i}: -" for i, c in summary["control"].items()))
     print(f"messages: {summary['messages']}")
     if "liar_id" in summary:
-        print(f"liar {summary['liar_id']}: min distance from honest cars {summary['liar_min_distance']}")
+        print(f"liars {summary['liar_ids']}: min distance from honest cars {summary['liar_min_distance']}, "
+              f"honest-liar breaches {summary['liar_breaches'] or 'none'}")
+    print("clock offsets as peers estimate them (ms, median): " + "  ".join(
+        f"{car}: {ms:+.0f}" for car, ms in summary.get("clock_offsets", {}).items()))
     print(f"crashed: {summary['crashed'] or 'none'}")
 
 
@@ -428,8 +455,16 @@ def main(argv: list[str] | None = None) -> int:
                         help="a scenario file, or a shipped scene's name (default: intersection, or "
                              "intersection-8 for more than 4 cars)")
     parser.add_argument("--cars", type=int, default=None, help="use the first N cars of the scenario")
-    parser.add_argument("--liar", type=int, default=None, help="car id that publishes falsified plans")
-    parser.add_argument("--misinformation", type=float, default=0.4, help="the liar's fraction of false plans")
+    parser.add_argument("--liar", type=int, action="append", default=None, metavar="ID",
+                        help="a car that lies (repeatable: --attack collude needs two)")
+    parser.add_argument("--attack", default=PAPER_LIAR,
+                        help=f"how the liars lie: {', '.join(ATTACKS)}, or several joined by + (default %(default)s)")
+    parser.add_argument("--attack-param", action="append", default=[], metavar="KEY=NUMBER",
+                        help="an attack parameter (repeatable), e.g. --attack-param bias_m=0.14")
+    parser.add_argument("--misinformation", type=float, default=None,
+                        help="the liar's fraction of false plans, for attacks with one (default 0.4)")
+    parser.add_argument("--clock-offset", action="append", default=[], metavar="ID=SECONDS",
+                        help="run car ID's process with a clock that far ahead of the fleet's (tests; repeatable)")
     parser.add_argument("--out", type=Path, default=None, help="run folder (default runs/sim-<time>)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the departures and cruise speeds")
     parser.add_argument("--timeout", type=float, default=None, help="seconds after the start (default: scenario's + 15)")
@@ -442,10 +477,12 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.cars is not None and args.cars < 1:
         parser.error("--cars must be at least 1")
-    if not 0.0 <= args.misinformation <= 1.0:
+    if args.misinformation is not None and not 0.0 <= args.misinformation <= 1.0:
         parser.error("--misinformation must be within [0, 1]")
     fleet = configured("trustfg sim", lambda: loopback_fleet(
-        load_scenario(args.scenario or default_scenario(args.cars)), args.cars, args.liar, args.misinformation))
+        load_scenario(args.scenario or default_scenario(args.cars)), args.cars, args.liar, args.misinformation,
+        attack=parse_attack(args.attack, args.attack_param),
+        clock_offsets=parse_id_values(args.clock_offset, "--clock-offset")))
     out = args.out or Path("runs") / time.strftime("sim-%Y%m%d-%H%M%S")
     stop = stop_on_signals(threading.Event())
     try:

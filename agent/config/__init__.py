@@ -14,8 +14,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from .attacks import ATTACKS, AttackConfig, parse_attack
-from .checks import ConfigError, parse_udp_address, positive, with_overrides
+from .attacks import ATTACKS, PAPER_LIAR, AttackConfig, liar_attack, parse_attack
+from .checks import ConfigError, parse_id_values, parse_udp_address, positive, with_overrides
 from .planning import PlannerConfig, TrustConfig
 from .running import BusConfig, ControlConfig, GuardConfig, NatNetConfig, TrackingConfig, VehicleConfig
 from .scene import CarConfig, Obstacle, SafetyConfig, SimConfig, WorldConfig
@@ -24,7 +24,7 @@ __all__ = [
     "ConfigError", "parse_udp_address", "positive", "with_overrides", "PlannerConfig", "TrustConfig",
     "BusConfig", "ControlConfig", "GuardConfig", "NatNetConfig", "TrackingConfig", "VehicleConfig",
     "CarConfig", "Obstacle", "SafetyConfig", "SimConfig", "WorldConfig", "Scenario", "PALETTE",
-    "ATTACKS", "AttackConfig", "parse_attack",
+    "ATTACKS", "AttackConfig", "PAPER_LIAR", "liar_attack", "parse_attack", "parse_id_values",
 ]
 
 

@@ -218,6 +218,23 @@ def _check(params, path: str) -> None:
         raise ConfigError(f"{path}: offset_min_m must not exceed offset_max_m")
 
 
+PAPER_LIAR = "displaced+false-testimony"
+"""The paper's liar (Sec. IV.C): false plans and false testimony; what ``--liar`` runs
+without ``--attack``."""
+
+
+def liar_attack(attack: AttackConfig | None, misinformation: float | None) -> AttackConfig:
+    """The attack a liar runs: ``attack`` (default: the paper's liar), with
+    ``misinformation`` as its fraction ``p`` of false plans when it has one and ``p`` was
+    not set otherwise."""
+    attack = attack or AttackConfig(PAPER_LIAR)
+    takes_p = any(f.name == "p" for name in attack.names for f in dataclasses.fields(ATTACKS[name]))
+    if misinformation is not None and takes_p and "p" not in attack.params:
+        attack = AttackConfig(attack.name, attack.params | {"p": misinformation})
+    attack.validate("attack")
+    return attack
+
+
 def parse_attack(name: str, assignments: list[str] | tuple[str, ...] = ()) -> AttackConfig:
     """``--attack NAME --attack-param k=v ...`` -> a validated AttackConfig."""
     params = {}

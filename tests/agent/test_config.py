@@ -54,6 +54,10 @@ def test_defaults_fill_what_a_file_leaves_out():
     (minimal(cars=[{"id": 1, "start": [0, 0], "goal": [1, 1], "attack": {"name": "nonsense"}}]), "attack.name"),
     (minimal(cars=[{"id": 1, "start": [0, 0], "goal": [1, 1], "attack": {"name": "bias", "params": {"p": 0.5}}}]),
      "attack.params.p"),
+    # a liar can bias its plans by anything under the tolerance unnoticed: the margin must cover it
+    (minimal(safety={"peer_margin_m": 0.1}), "safety.peer_margin_m (0.1) must be at least trust.transparency_tolerance_m"),
+    (minimal(sim={"message_loss": 1.0}), "sim.message_loss"),
+    (minimal(cars=[{"id": 1, "start": [0, 0], "goal": [1, 1], "clock_offset_s": 100.0}]), "cars[0].clock_offset_s"),
 ])
 def test_bad_config_names_the_key(data, message):
     with pytest.raises(ConfigError) as info:
