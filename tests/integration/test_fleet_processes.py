@@ -4,19 +4,22 @@ import json
 
 import pytest
 
+from trustfg.agent.config import AttackConfig
 from trustfg.fleet.launch import loopback_fleet, run
 
 
 @pytest.fixture(scope="module")
 def honest(intersection, tmp_path_factory):
     out = tmp_path_factory.mktemp("honest")
-    return out, run(loopback_fleet(intersection, None, None, 0.0), out, seed=11)
+    # Car 2's process runs on a clock 0.3 s ahead: an honest car on a bad NTP day.
+    return out, run(loopback_fleet(intersection, None, clock_offsets={2: 0.3}), out, seed=11)
 
 
 @pytest.fixture(scope="module")
 def liar(lab, tmp_path_factory):
     out = tmp_path_factory.mktemp("liar")
-    return out, run(loopback_fleet(lab, None, 1, 0.4), out, seed=12)
+    # The false future: true now, 0.6 m sideways a second later (the audit's job).
+    return out, run(loopback_fleet(lab, None, 1, attack=AttackConfig("false-future+false-testimony")), out, seed=12)
 
 
 def test_four_car_processes_reach_their_goals_without_breach(honest):
@@ -35,6 +38,15 @@ def test_four_car_processes_reach_their_goals_without_breach(honest):
     for car in map(str, summary["car_ids"]):
         assert summary["replan_ms"][car]["count"] > 10
         assert summary["control"][car]["sent"] > 100
+
+
+def test_a_skewed_clock_is_seen_and_forgiven(honest):
+    """Its peers estimate car 2's clock 0.3 s ahead (less the network's least latency) and
+    keep trusting it: its plans are moved onto their clocks before they are checked."""
+    _, summary = honest
+    assert summary["clock_offsets"]["2"] == pytest.approx(300.0, abs=30.0)
+    assert all(abs(summary["clock_offsets"][car]) < 30.0 for car in ("1", "3", "4"))
+    assert summary["honest_trust_min_after_settle"] >= 0.8
 
 
 def test_honest_cars_distrust_a_liar_over_the_network(liar):
