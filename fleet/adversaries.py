@@ -22,15 +22,23 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
-import os
 import time
-from pathlib import Path
 
 from ..agent.config import AttackConfig, Scenario
 from ..agent.scenario_files import load_scenario
 from . import stats
-from .experiments import Progress, _pool, run_one, trust_off, trust_on, uniform_wide, with_attack
+from .experiments import (
+    Progress,
+    _pool,
+    run_one,
+    study_folder,
+    study_options,
+    trust_off,
+    trust_on,
+    uniform_wide,
+    with_attack,
+    write_study,
+)
 
 LIAR = 1
 PARTNER = 3
@@ -100,28 +108,25 @@ def summarise(results: dict) -> dict:
 
 def table(summary: dict, title: str) -> str:
     """A markdown table: one row per scene, attack and variant."""
-    lines = [f"#### {title}", "",
-             "| scene | attack | fleet | honest-liar breaches (seeds) | least clearance (m) | "
-             "detected within 3 s | detection (s), median | false positives | makespan (s), median |",
-             "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+    rows = []
     for scene, by_attack in summary.items():
         for attack, by_variant in by_attack.items():
             for variant, c in by_variant.items():
                 never = f" ({c['never_detected']} never)" if c["never_detected"] else ""
                 stuck = c["runs"] - c["all_arrived"]
-                late = f" ({stuck} not all arrived)" if stuck else ""
-                lines.append(
-                    f"| {scene} | {attack} | {variant} | {c['breach_seeds']}/{c['runs']} "
-                    f"({stats.show(c['breach_rate'], 0, True)}) | {c['min_clearance_m']:.3f} | "
-                    f"{stats.show(c['detected_3s_rate'], 0, True)} | {stats.show(c['detection_s'], 1)}{never} | "
-                    f"{stats.show(c['false_positive_rate'], 0, True)} | {stats.show(c['makespan_s'], 1)}{late} |")
-    return "\n".join(lines) + "\n"
+                rows.append([scene, attack, variant,
+                             f"{c['breach_seeds']}/{c['runs']} ({stats.show(c['breach_rate'], 0, True)})",
+                             f"{c['min_clearance_m']:.3f}", stats.show(c["detected_3s_rate"], 0, True),
+                             stats.show(c["detection_s"], 1) + never, stats.show(c["false_positive_rate"], 0, True),
+                             stats.show(c["makespan_s"], 1) + (f" ({stuck} not all arrived)" if stuck else "")])
+    return stats.markdown(title, ["scene", "attack", "fleet", "honest-liar breaches (seeds)", "least clearance (m)",
+                                  "detected within 3 s", "detection (s), median", "false positives",
+                                  "makespan (s), median"], rows)
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="trustfg experiment adversaries", description=__doc__.split("\n")[0])
-    parser.add_argument("--seed", type=int, default=0, help="first seed (default 0)")
-    parser.add_argument("--seeds", type=int, default=50, help="seeds per cell (default 50)")
+    study_options(parser, seeds=50)
     parser.add_argument("--scenes", nargs="+", default=["lab", "intersection"], help="scenes (default: lab intersection)")
     parser.add_argument("--attacks", nargs="+", choices=list(ATTACKS), default=list(ATTACKS), metavar="ATTACK",
                         help=f"attacks (default: all: {', '.join(ATTACKS)})")
@@ -130,13 +135,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--held-out", nargs="*", default=["intersection-8"],
                         help="scenes run with trust on only and reported apart (default: intersection-8)")
     parser.add_argument("--held-out-seeds", type=int, default=20, help="seeds per held-out cell (default 20)")
-    parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="parallel simulations (default: one per core)")
-    parser.add_argument("--out", type=Path, default=None, help="output folder (default runs/experiment-<time>)")
     args = parser.parse_args(argv)
     if args.seeds < 1 or args.held_out_seeds < 1:
         parser.error("--seeds and --held-out-seeds must be at least 1")
-    out = (args.out or Path("runs") / time.strftime("experiment-%Y%m%d-%H%M%S")) / "adversaries"
-    out.mkdir(parents=True, exist_ok=True)
+    out = study_folder(args.out, "adversaries")
     started = time.perf_counter()
     seeds = list(range(args.seed, args.seed + args.seeds))
     results = run_matrix(args.scenes, args.attacks, args.variants, seeds, args.jobs)
@@ -147,11 +149,8 @@ def main(argv: list[str] | None = None) -> int:
               "summary": summarise(results), "held_out": summarise(held_results),
               "runs": results, "held_out_runs": held_results,
               "wall_time_s": round(time.perf_counter() - started, 1)}
-    (out / "metrics.json").write_text(json.dumps(report, indent=1))
     text = table(report["summary"], f"{len(seeds)} seeds per cell")
     if held_results:
         text += "\n" + table(report["held_out"], f"held out: trust on, {len(held)} seeds per cell")
-    (out / "table.md").write_text(text)
-    print(text)
-    print(f"wrote {out.resolve()} in {report['wall_time_s']:.0f} s")
+    write_study(out, report, text)
     return 0

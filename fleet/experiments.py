@@ -321,6 +321,28 @@ class Progress:
 # --- command line ------------------------------------------------------------------------------
 
 
+def study_options(parser: argparse.ArgumentParser, seeds: int) -> None:
+    """The options every multi-seed study shares: --seed, --seeds, --jobs, --out."""
+    parser.add_argument("--seed", type=int, default=0, help="first seed (default 0)")
+    parser.add_argument("--seeds", type=int, default=seeds, help=f"seeds per cell (default {seeds})")
+    parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="parallel simulations (default: one per core)")
+    parser.add_argument("--out", type=Path, default=None, help="output folder (default runs/experiment-<time>)")
+
+
+def study_folder(out: Path | None, name: str) -> Path:
+    folder = (out or Path("runs") / time.strftime("experiment-%Y%m%d-%H%M%S")) / name
+    folder.mkdir(parents=True, exist_ok=True)
+    return folder
+
+
+def write_study(folder: Path, report: dict, text: str) -> None:
+    """metrics.json and table.md of a study, and the table on stdout."""
+    (folder / "metrics.json").write_text(json.dumps(report, indent=1))
+    (folder / "table.md").write_text(text)
+    print(text)
+    print(f"wrote {folder.resolve()} in {report['wall_time_s']:.0f} s")
+
+
 STUDIES = {"adversaries": "adversaries", "transparency-sweep": "sweep"}
 """Experiments with their own options (``trustfg experiment NAME --help``), by module."""
 

@@ -92,3 +92,10 @@ def show(estimated: dict | None, digits: int = 2, percent: bool = False) -> str:
     unit = " %" if percent else ""
     value, (low, high) = estimated["value"] * scale, estimated["ci"]
     return f"{value:.{digits}f} [{low * scale:.{digits}f}, {high * scale:.{digits}f}]{unit}"
+
+
+def markdown(title: str, header: list[str], rows: list[list[str]]) -> str:
+    """A titled markdown table."""
+    lines = [f"#### {title}", "", "| " + " | ".join(header) + " |", "|" + " --- |" * len(header)]
+    lines += ["| " + " | ".join(map(str, row)) + " |" for row in rows]
+    return "\n".join(lines) + "\n"

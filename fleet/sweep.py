@@ -23,16 +23,23 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
-import os
 import time
-from pathlib import Path
 
 from ..agent.config import Scenario
 from ..agent.scenario_files import load_scenario
 from . import stats
 from .adversaries import run_summary
-from .experiments import Progress, _pool, trust_off, trust_on, uniform_wide, with_liar
+from .experiments import (
+    Progress,
+    _pool,
+    study_folder,
+    study_options,
+    trust_off,
+    trust_on,
+    uniform_wide,
+    with_liar,
+    write_study,
+)
 
 
 def with_gain(scenario: Scenario, gain: float) -> Scenario:
@@ -49,34 +56,25 @@ def fleets(gains: list[float]) -> dict:
 
 
 def table(summary: dict, title: str) -> str:
-    lines = [f"#### {title}", "",
-             "| misinformation | fleet | honest-liar breaches (seeds) | least clearance (m) | "
-             "distance to the liar (m), median | false positives | makespan (s), median |",
-             "| --- | --- | --- | --- | --- | --- | --- |"]
-    for p, by_fleet in summary.items():
-        for fleet, c in by_fleet.items():
-            lines.append(f"| {p} | {fleet} | {c['breach_seeds']}/{c['runs']} | {c['min_clearance_m']:.3f} | "
-                         f"{stats.show(c['liar_distance_m'])} | {stats.show(c['false_positive_rate'], 0, True)} | "
-                         f"{stats.show(c['makespan_s'], 1)} |")
-    return "\n".join(lines) + "\n"
+    rows = [[p, fleet, f"{c['breach_seeds']}/{c['runs']}", f"{c['min_clearance_m']:.3f}", stats.show(c["liar_distance_m"]),
+             stats.show(c["false_positive_rate"], 0, True), stats.show(c["makespan_s"], 1)]
+            for p, by_fleet in summary.items() for fleet, c in by_fleet.items()]
+    return stats.markdown(title, ["misinformation", "fleet", "honest-liar breaches (seeds)", "least clearance (m)",
+                                  "distance to the liar (m), median", "false positives", "makespan (s), median"], rows)
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="trustfg experiment transparency-sweep", description=__doc__.split("\n")[0])
-    parser.add_argument("--seed", type=int, default=0, help="first seed (default 0)")
-    parser.add_argument("--seeds", type=int, default=30, help="seeds per cell (default 30)")
+    study_options(parser, seeds=30)
     parser.add_argument("--scene", default="lab", help="scene (default: lab, where every route crosses the liar's)")
     parser.add_argument("--misinformation", nargs="+", type=float, default=[0.05, 0.1, 0.2, 0.4, 0.6, 0.8],
                         help="the liar's fractions of false plans (default: 0.05 0.1 0.2 0.4 0.6 0.8)")
     parser.add_argument("--gains", nargs="+", type=float, default=[1.5, 2.0, 3.0],
                         help="g_max of the trust-on and uniformly wide fleets (default: 1.5 2 3)")
-    parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="parallel simulations (default: one per core)")
-    parser.add_argument("--out", type=Path, default=None, help="output folder (default runs/experiment-<time>)")
     args = parser.parse_args(argv)
     if args.seeds < 1 or any(not 0 < p <= 1 for p in args.misinformation) or any(g < 1 for g in args.gains):
         parser.error("need --seeds >= 1, misinformation within (0, 1] and gains >= 1")
-    out = (args.out or Path("runs") / time.strftime("experiment-%Y%m%d-%H%M%S")) / "transparency-sweep"
-    out.mkdir(parents=True, exist_ok=True)
+    out = study_folder(args.out, "transparency-sweep")
     started = time.perf_counter()
     base = load_scenario(args.scene)
     seeds = list(range(args.seed, args.seed + args.seeds))
@@ -95,9 +93,5 @@ def main(argv: list[str] | None = None) -> int:
     summary = {p: {fleet: stats.cell(runs) for fleet, runs in by_fleet.items()} for p, by_fleet in results.items()}
     report = {"experiment": "transparency-sweep", "scene": args.scene, "seeds": seeds, "summary": summary,
               "runs": results, "wall_time_s": round(time.perf_counter() - started, 1)}
-    (out / "metrics.json").write_text(json.dumps(report, indent=1))
-    text = table(summary, f"{args.scene}, car 1 lies, {len(seeds)} seeds per cell")
-    (out / "table.md").write_text(text)
-    print(text)
-    print(f"wrote {out.resolve()} in {report['wall_time_s']:.0f} s")
+    write_study(out, report, table(summary, f"{args.scene}, car 1 lies, {len(seeds)} seeds per cell"))
     return 0

@@ -26,7 +26,8 @@ from .checks import ConfigError
 @dataclass(frozen=True)
 class Displaced:
     """Today's liar (paper Sec. IV.C): a fraction ``p`` of plan messages shows the true plan
-    moved as a whole by U(offset_min_m, offset_max_m) in a uniformly random direction."""
+    moved as a whole by U(offset_min_m, offset_max_m) in a uniformly random direction.
+    Other attacks that displace plans take these parameters too."""
 
     p: float = 0.4
     offset_min_m: float = 0.4
@@ -34,15 +35,12 @@ class Displaced:
 
 
 @dataclass(frozen=True)
-class ForgedStamp:
+class ForgedStamp(Displaced):
     """Every plan message is stamped ``shift_s`` off the truth (> 0: in the future, < 0: in
     the past; the plan's own times stay true), and a fraction ``p`` is displaced as in
     ``displaced`` besides."""
 
     shift_s: float = 0.2
-    p: float = 0.4
-    offset_min_m: float = 0.4
-    offset_max_m: float = 0.8
 
 
 @dataclass(frozen=True)
@@ -77,15 +75,13 @@ class FalseYield:
 
 
 @dataclass(frozen=True)
-class OnOff:
-    """Lies in bursts: every plan displaced (``offset_min_m``..``offset_max_m``) for
-    ``on_s``, then honest for ``off_s`` (long enough for trust to recover), repeating from
-    its first message."""
+class OnOff(Displaced):
+    """Lies in bursts: every plan displaced (``offset_min_m``..``offset_max_m``; ``p`` is not
+    used) for ``on_s``, then honest for ``off_s`` (long enough for trust to recover),
+    repeating from its first message."""
 
     on_s: float = 1.0
     off_s: float = 4.0
-    offset_min_m: float = 0.4
-    offset_max_m: float = 0.8
 
 
 @dataclass(frozen=True)
@@ -135,15 +131,12 @@ class Framing:
 
 
 @dataclass(frozen=True)
-class Collude:
+class Collude(Displaced):
     """One of a colluding group (every car whose attack includes ``collude``): it displaces
     a fraction ``p`` of its plans (as ``displaced``), its trust reports claim ``amount``
     successes about every partner and, with ``slander`` 1, swap its evidence about
     everyone else."""
 
-    p: float = 0.4
-    offset_min_m: float = 0.4
-    offset_max_m: float = 0.8
     amount: float = 30.0
     slander: float = 1
 
