@@ -59,6 +59,16 @@ class Liar:
     victim: int | None = None
     victim_until: float = -np.inf
     counters: Counter = field(default_factory=Counter)
+    tolerance_m: float = np.inf
+    """How false a plan must be to count as a lie for the record: the fleet's
+    ``plan_reject_m``, beyond which a claim is a full transparency failure ..."""
+    horizon_s: float = 0.0
+    """... within this far past its stamp: what the audit holds a plan to (its notice
+    after the next plan). A claim further ahead is superseded before it comes due, and no
+    observation can tell it from a mind changed in time."""
+    first_lie_at: float | None = None
+    """When it first published such a lie (bookkeeping for experiments: detection is
+    timed from there)."""
 
     def plan(self, plan: Plan, now: float, own: Motion | None, seen: dict[int, Motion]) -> tuple[Plan, float]:
         """The plan and stamp to publish instead of (``plan``, ``now``)."""
@@ -74,6 +84,8 @@ class Liar:
         self.history.append((now, plan))
         if lied:
             self.counters["plans_falsified"] += 1
+            if self.first_lie_at is None and _deviation(out, stamp, plan, now, self.horizon_s) > self.tolerance_m:
+                self.first_lie_at = now
         return out, stamp
 
     def testimony(self, report: TrustReport) -> TrustReport:
@@ -176,6 +188,13 @@ PLAN_LIES = {
     "displaced": _displaced, "forged-stamp": _forged_stamp, "bias": _bias, "false-future": _false_future,
     "false-yield": _false_yield, "on-off": _on_off, "replay": _replay, "collude": _collude,
 }
+
+
+def _deviation(told: Plan, stamp: float, true: Plan, now: float, horizon_s: float) -> float:
+    """How far what it told is from the truth over the next ``horizon_s``: the claim for
+    ``stamp + u`` against where it will be at ``now + u``."""
+    u = np.linspace(0.0, horizon_s, 15)
+    return float(np.max(np.linalg.norm(told.position_at(stamp + u) - true.position_at(now + u), axis=1)))
 
 
 def _nearest(position: np.ndarray, seen: dict[int, Motion]) -> int | None:

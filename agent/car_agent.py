@@ -103,7 +103,9 @@ class CarAgent:
         if self.car.attack is not None:
             partners = frozenset(c.id for c in self.scenario.cars if c.id != self.car.id and c.attack is not None
                                  and "collude" in c.attack.names)
-            self.liar = Liar(self.car.id, self.car.attack, self.rng, partners)
+            self.liar = Liar(self.car.id, self.car.attack, self.rng, partners,
+                             tolerance_m=self.scenario.trust.plan_reject_m,
+                             horizon_s=self.scenario.trust.audit_notice_s + self.scenario.control.replan_period_s)
         self.set_departure(self.depart_at, self.cruise_speed_mps or self.scenario.planner.cruise_speed_mps)
 
     def set_departure(self, depart_at: float, cruise_speed_mps: float) -> None:

@@ -120,7 +120,7 @@ def table(summary: dict, title: str) -> str:
                              stats.show(c["detection_s"], 1) + never, stats.show(c["false_positive_rate"], 0, True),
                              stats.show(c["makespan_s"], 1) + (f" ({stuck} not all arrived)" if stuck else "")])
     return stats.markdown(title, ["scene", "attack", "fleet", "honest-liar breaches (seeds)", "least clearance (m)",
-                                  "detected within 3 s", "detection (s), median", "false positives",
+                                  "detected within 3 s of the first lie", "detection (s), median", "false positives",
                                   "makespan (s), median"], rows)
 
 

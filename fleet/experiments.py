@@ -151,6 +151,10 @@ def summarise(scenario: Scenario, record: RunRecord) -> dict:
         detected = [metrics.trust_detection(record.trust_times, record.trust, liar, honest, TRUST_GAP) for liar in liars]
         run["trust_separated_at_s"] = None if None in separated else max(separated)
         run["trust_detected_at_s"] = None if None in detected else max(detected)
+        lies = [record.first_lie_s[i] for i in liars if record.first_lie_s and record.first_lie_s[i] is not None]
+        run["first_lie_s"] = round(float(min(lies)), 3) if lies else None
+        run["detection_delay_s"] = (round(run["trust_detected_at_s"] - run["first_lie_s"], 3)
+                                    if lies and run["trust_detected_at_s"] is not None else None)
     return run
 
 

@@ -166,6 +166,7 @@ def simulate(scenario: Scenario, seed: int, sdf: SignedDistanceField | None = No
         final_plans=[(a.plan.positions.copy(), a.plan.velocities.copy()) if a.plan is not None else
                      (np.zeros((0, 2)), np.zeros((0, 2))) for a in agents],
         plan_log=plan_log,
+        first_lie_s=[a.liar.first_lie_at if a.liar else None for a in agents],
     )
 
 

@@ -43,6 +43,9 @@ class RunRecord:
     final_plans: list[tuple[np.ndarray, np.ndarray]] = field(default_factory=list)
     plan_log: list = field(default_factory=list)
     """(t, car index, Plan) of every replan, when simulate(keep_plans=True)."""
+    first_lie_s: list = field(default_factory=list)
+    """Per car: when it first published a plan false by more than plan_reject_m within
+    what the audit holds it to (agent.attacks.Liar; liars only; None: never)."""
 
 
 def arrivals(scenario: Scenario, times: np.ndarray, states: np.ndarray) -> list[float | None]:

@@ -5,9 +5,13 @@ seeds; :func:`cell` reduces them to the numbers the tables print, each with its 
 
     breach_rate       seeds in which an honest car and a liar breached the clearance
     min_clearance_m   least honest-liar clearance over all seeds (edge to edge); and its median
-    detected_3s_rate  seeds in which trust separated the liar within 3 s (see experiments)
-    detection_s       median time until every honest car trusts the liar 0.2 below every
-                      honest peer (seeds where that never happens are left out, counted apart)
+    detected_3s_rate  of the seeds in which the liar told a lie (a plan false by more than
+                      plan_reject_m, a full transparency failure, within the 0.7 s the audit
+                      holds a plan to), those in which every honest car trusted it 0.2 below every
+                      honest peer within 3 s of that first lie
+    detection_s       median time from that first lie to detection (seeds where detection
+                      never happens are left out and counted apart; "-" where it never lied
+                      beyond plan_reject_m)
     false_positive_rate  seeds in which an honest car's trust in an honest peer fell below 0.8
                       after the first 3 s
     makespan_s        median time at which the last car arrived (runs where all arrived)
@@ -66,15 +70,17 @@ def cell(runs: list[dict]) -> dict:
     }
     if not liar:
         return out
-    detected = [r.get("trust_detected_at_s") for r in runs]
+    lied = [r for r in runs if r.get("first_lie_s") is not None]
+    delays = [r.get("detection_delay_s") for r in lied]
     out |= {
         "breach_rate": rate([bool(r["liar_breaches"]) for r in runs]),
         "breach_seeds": sum(1 for r in runs if r["liar_breaches"]),
         "min_clearance_m": round(min(r["liar_min_clearance"] for r in runs), 4),
         "median_clearance_m": estimate([r["liar_min_clearance"] for r in runs]),
-        "detected_3s_rate": rate([d is not None and d <= DETECTION_LIMIT_S for d in detected]),
-        "detection_s": estimate(detected),
-        "never_detected": sum(1 for d in detected if d is None),
+        "lied_beyond_tolerance": len(lied),
+        "detected_3s_rate": rate([d is not None and d <= DETECTION_LIMIT_S for d in delays]),
+        "detection_s": estimate(delays),
+        "never_detected": sum(1 for d in delays if d is None),
         "false_positive_rate": rate([r["honest_trust_min_after_settle"] is not None
                                      and r["honest_trust_min_after_settle"] < FALSE_POSITIVE_TRUST for r in runs]),
         "honest_trust_min": round(min(r["honest_trust_min_after_settle"] for r in runs
