@@ -11,7 +11,7 @@ How peers' plans are used (agent.evidence; docs/architecture.md, "Trust"):
   misses by more than ``plan_reject_m`` is not planned against: we keep the sender's last
   plan that agreed with what we saw. Observation beats testimony.
 * Every accepted plan is audited as its future comes (agent.audit): a future that does
-  not come true is evidence against its sender, and withdraws the plan.
+  not come true is evidence against its sender (its epsilon widens).
 * A plan not checked yet is planned against only at the widest epsilon; a peer with no
   usable plan for ``stale_after_s`` (silent, partitioned, or lying every time) is
   predicted from its observed motion and kept at the widest safety distance. Silence is

@@ -15,8 +15,10 @@ A plan message goes through, in order (docs/architecture.md, "Trust"):
    plan is *unverified*: we keep planning against the last verified plan while it is
    fresh, and against the unverified one only at the widest epsilon -- never as if it
    were trusted. A plan that passes is the peer's accepted plan; one that misses by more
-   than ``plan_reject_m`` is refused; an accepted plan whose future later misses by more
-   than reject(lag) is withdrawn (the peer is then predicted from what we see of it).
+   than ``plan_reject_m`` is refused. A future that does not come true is evidence
+   against its sender (and counted past reject(lag)), which widens its epsilon; the plan
+   is not withdrawn: the newest plan is still the best guess of where the peer goes, and
+   dropping it for a prediction from motion would jolt every plan made around it.
 
 With ``reject_plans`` off (the paper's baseline) every plan is believed as it arrives;
 the evidence is gathered all the same.
@@ -126,11 +128,7 @@ def audit(view: PeerView, track: Track | None, record: Record, counters: Counter
             elif view.unverified is plan or check.claim.stamp > view.accepted_stamp:
                 view.accept(plan, check.claim.stamp, check.claim.received)
         elif check.rejected:
-            counters["plans_failed_audit"] += 1  # its future did not come true: stop believing it
-            if view.accepted is plan:
-                view.accepted = None
-            if view.unverified is plan:
-                view.unverified = None
+            counters["plans_failed_audit"] += 1  # its future did not come true: evidence, and counted
     counters["plans_unverified"] += view.ledger.unverifiable - unverifiable
 
 
