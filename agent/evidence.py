@@ -68,8 +68,10 @@ class PeerView:
     """(t, observed velocity) at evidence ticks."""
     history: deque = field(default_factory=lambda: deque(maxlen=32))
     """(stamp, plan) of the plans accepted lately, in order of arrival (our clock)."""
-    clock: ClockEstimate = None
-    ledger: Ledger = None
+    clock: ClockEstimate = field(init=False)
+    """Its clock's offset from ours (agent.clocks)."""
+    ledger: Ledger = field(init=False)
+    """Its plans still being held to their word (agent.audit)."""
 
     def __post_init__(self) -> None:
         self.clock = ClockEstimate(self.config.clock_window_s, self.config.clock_tolerance_s)
