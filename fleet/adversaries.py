@@ -6,7 +6,8 @@
                                    [--jobs J] [--out DIR]
 
 Per scene, attack (car 1 lies; ``collude``: cars 1 and 3) and seed, the in-process fleet
-runs three ways:
+runs three ways (and the honest fleet under loss, delay and a skewed clock with trust on,
+``honest-lossy-clock``: what trust costs honest cars):
 
     on     trust on: every factor, plan rejection, the audit, epsilon from trust
     off    the paper's baseline: trust gathered but not used, every plan believed, eps_0
@@ -60,6 +61,19 @@ ATTACKS: dict[str, dict[int, AttackConfig]] = {
 }
 """The attacks of the table, by label: which car runs which attack (config.attacks)."""
 
+SKEWED_CAR = 2
+
+
+def lossy_clock(scenario: Scenario) -> Scenario:
+    """No liar; 30 % of messages lost, 50 +- 20 ms delay, car 2's clock 0.3 s ahead."""
+    sim = dataclasses.replace(scenario.sim, message_loss=0.3, message_latency_s=0.03, message_jitter_s=0.04)
+    cars = tuple(dataclasses.replace(c, clock_offset_s=0.3) if c.id == SKEWED_CAR else c for c in scenario.cars)
+    return dataclasses.replace(scenario, sim=sim, cars=cars)
+
+
+HONEST = {"honest-lossy-clock": lossy_clock}
+"""Honest fleets under faults (trust on only): what trust costs honest cars."""
+
 PLAN_LIES = ("displaced", "forged-future", "forged-past", "false-future", "false-yield", "on-off", "replay",
              "collude")
 """Attacks whose false claims exceed the transparency tolerance somewhere in the plan (the
@@ -83,8 +97,9 @@ def run_matrix(scenes: list[str], attacks: list[str], variants: list[str], seeds
     for scene in scenes:
         base = load_scenario(scene)
         for attack in attacks:
-            attacked = with_attack(base, ATTACKS[attack])
-            for variant in variants:
+            honest = attack in HONEST
+            attacked = HONEST[attack](base) if honest else with_attack(base, ATTACKS[attack])
+            for variant in (["on"] if honest else variants):
                 made = VARIANTS[variant](attacked)
                 tasks.extend((scene, attack, variant, made, seed) for seed in seeds)
     results: dict = {}
@@ -95,7 +110,8 @@ def run_matrix(scenes: list[str], attacks: list[str], variants: list[str], seeds
         for scene, attack, variant, seed, future in futures:
             run = future.result()
             results.setdefault(scene, {}).setdefault(attack, {}).setdefault(variant, []).append(run)
-            progress.step(f"{scene} {attack} {variant} seed {seed}: liar clearance {run['liar_min_clearance']:.3f} m")
+            progress.step(f"{scene} {attack} {variant} seed {seed}: least clearance "
+                          f"{run.get('liar_min_clearance', min(min(r) for r in run['min_clearance'])):.3f} m")
     progress.done()
     return results
 
@@ -112,13 +128,19 @@ def table(summary: dict, title: str) -> str:
     for scene, by_attack in summary.items():
         for attack, by_variant in by_attack.items():
             for variant, c in by_variant.items():
-                never = f" ({c['never_detected']} never)" if c["never_detected"] else ""
                 stuck = c["runs"] - c["all_arrived"]
+                makespan = stats.show(c["makespan_s"], 1) + (f" ({stuck} not all arrived)" if stuck else "")
+                if "breach_rate" not in c:  # an honest fleet: any breach, no detection
+                    rows.append([scene, attack, variant, f"{c['breach_seeds_any']}/{c['runs']} (any pair)",
+                                 f"{c['min_clearance_m']:.3f}", "-", "-",
+                                 stats.show(c["false_positive_rate"], 0, True), makespan])
+                    continue
+                never = f" ({c['never_detected']} never)" if c["never_detected"] else ""
                 rows.append([scene, attack, variant,
                              f"{c['breach_seeds']}/{c['runs']} ({stats.show(c['breach_rate'], 0, True)})",
                              f"{c['min_clearance_m']:.3f}", stats.show(c["detected_3s_rate"], 0, True),
                              stats.show(c["detection_s"], 1) + never, stats.show(c["false_positive_rate"], 0, True),
-                             stats.show(c["makespan_s"], 1) + (f" ({stuck} not all arrived)" if stuck else "")])
+                             makespan])
     return stats.markdown(title, ["scene", "attack", "fleet", "honest-liar breaches (seeds)", "least clearance (m)",
                                   "detected within 3 s of the first lie", "detection (s), median", "false positives",
                                   "makespan (s), median"], rows)
@@ -128,8 +150,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="trustfg experiment adversaries", description=__doc__.split("\n")[0])
     study_options(parser, seeds=50)
     parser.add_argument("--scenes", nargs="+", default=["lab", "intersection"], help="scenes (default: lab intersection)")
-    parser.add_argument("--attacks", nargs="+", choices=list(ATTACKS), default=list(ATTACKS), metavar="ATTACK",
-                        help=f"attacks (default: all: {', '.join(ATTACKS)})")
+    parser.add_argument("--attacks", nargs="+", choices=[*ATTACKS, *HONEST], default=[*ATTACKS, *HONEST],
+                        metavar="ATTACK", help=f"attacks (default: all: {', '.join([*ATTACKS, *HONEST])})")
     parser.add_argument("--variants", nargs="+", choices=list(VARIANTS), default=list(VARIANTS),
                         help="fleets (default: on off wide)")
     parser.add_argument("--held-out", nargs="*", default=["intersection-8"],
@@ -145,7 +167,8 @@ def main(argv: list[str] | None = None) -> int:
     held = list(range(args.seed, args.seed + args.held_out_seeds))
     held_results = run_matrix(args.held_out, args.attacks, ["on"], held, args.jobs, "held-out") if args.held_out else {}
     report = {"experiment": "adversaries", "seeds": seeds, "held_out_seeds": held, "liar": LIAR, "partner": PARTNER,
-              "attacks": {a: {str(car): dataclasses.asdict(c) for car, c in ATTACKS[a].items()} for a in args.attacks},
+              "attacks": {a: {str(car): dataclasses.asdict(c) for car, c in ATTACKS[a].items()}
+                          for a in args.attacks if a in ATTACKS},
               "summary": summarise(results), "held_out": summarise(held_results),
               "runs": results, "held_out_runs": held_results,
               "wall_time_s": round(time.perf_counter() - started, 1)}

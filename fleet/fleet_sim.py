@@ -4,9 +4,8 @@ Every car is a :class:`CarAgent` (the same planner and trust code the car proces
 driving a simulated unicycle (agent.vehicle) with the tracking controller of the
 bridge (bridge.tracking). Cars see each other through noisy pose observations and talk
 through the fleet message codec (agent.messages: msgpack bytes, decoded and filtered by
-an Inbox per receiver), with a message latency (``sim.message_latency_s`` +-
-``sim.message_jitter_s``, in order per link) and loss (``sim.message_loss``) drawn per
-receiver. Time is simulated: a replan takes no simulated time, so a run is exactly
+an Inbox per receiver), over a :class:`Network` with latency, jitter and loss
+(``[sim]``). Time is simulated: a replan takes no simulated time, so a run is exactly
 repeatable from its seed. A car with ``clock_offset_s`` reads every time off its own
 clock, that much ahead of the fleet's: its observations, stamps, departure and plan
 tracking, as a car computer with a wrong clock would.
@@ -26,7 +25,7 @@ import numpy as np
 
 from ..agent import messages
 from ..agent.car_agent import CarAgent
-from ..agent.config import Scenario
+from ..agent.config import Scenario, SimConfig
 from ..agent.vehicle import VehicleState
 from ..agent.vehicle import step as vehicle_step
 from ..agent.world import SignedDistanceField, build_sdf
@@ -69,22 +68,7 @@ def simulate(scenario: Scenario, seed: int, sdf: SignedDistanceField | None = No
     vehicles = [VehicleState(c.start[0], c.start[1], c.start_heading) for c in cars]
 
     clock = np.array([c.clock_offset_s for c in cars])  # each car's clock minus the fleet's
-    link_rng = np.random.default_rng([seed, 11])
-    queue: list[tuple[float, int, int, int, bytes]] = []  # (deliver_at, order, sender, receiver, payload)
-    link_free = np.zeros((n, n))  # a link never reorders: the last delivery time per (sender, receiver)
-    order = 0
-
-    def publish(sender: int, message: messages.Message, now: float) -> None:
-        nonlocal order
-        payload = messages.encode(message)
-        for receiver in range(n):
-            if receiver == sender or (sim.message_loss > 0.0 and link_rng.random() < sim.message_loss):
-                continue
-            jitter = link_rng.uniform(-sim.message_jitter_s, sim.message_jitter_s) if sim.message_jitter_s else 0.0
-            deliver = max(now + sim.message_latency_s + jitter, link_free[sender, receiver])
-            link_free[sender, receiver] = deliver
-            heapq.heappush(queue, (deliver, order, sender, receiver, payload))
-            order += 1
+    network = Network(sim, n, np.random.default_rng([seed, 11]))
 
     steps = int(math.ceil(sim.timeout_s / step_s)) + 1
     times, states = [], []
@@ -99,11 +83,10 @@ def simulate(scenario: Scenario, seed: int, sdf: SignedDistanceField | None = No
         t = k * step_s
         # 1. Deliver due messages through each receiver's inbox (decode + order/replay filter).
         own = t + clock  # every car's own reading of the time
-        while queue and queue[0][0] <= t + 1e-9:
-            _, _, sender, j, payload = heapq.heappop(queue)
-            message = inboxes[j].accept(payload, key_sender=ids[sender])
+        for sender, receiver, payload in network.due(t):
+            message = inboxes[receiver].accept(payload, key_sender=ids[sender])
             if message is not None:
-                agents[j].receive(message, own[j])
+                agents[receiver].receive(message, own[receiver])
         # 2. Everyone sees everyone (mocap), with noise.
         for i, state in enumerate(vehicles):
             noisy = noise_rng.normal(0.0, sim.observation_noise_m, (n, 2))
@@ -119,10 +102,10 @@ def simulate(scenario: Scenario, seed: int, sdf: SignedDistanceField | None = No
                     plan_log.append((t, i, agent.plan))
                 outgoing = agent.plan_message(own[i])
                 if outgoing is not None:
-                    publish(i, outgoing, t)
+                    network.publish(i, messages.encode(outgoing), t)
             if t + 1e-9 >= next_report[i]:
                 next_report[i] += control.trust_report_period_s
-                publish(i, agent.trust_message(own[i]), t)
+                network.publish(i, messages.encode(agent.trust_message(own[i])), t)
         if t + 1e-9 >= next_trust_record:
             next_trust_record += RECORD_TRUST_PERIOD_S
             trust_times.append(t)
@@ -161,7 +144,8 @@ def simulate(scenario: Scenario, seed: int, sdf: SignedDistanceField | None = No
         epsilon=np.array(epsilon_rows),
         replan_ms=[list(a.replan_ms) for a in agents],
         counters=[dict(a.counters) | {f"trust_{k}": v for k, v in a.trust.counters.items()}
-                  | ({f"attack_{k}": v for k, v in a.liar.counters.items()} if a.liar else {}) for a in agents],
+                  | ({f"attack_{k}": v for k, v in a.liar.counters.items()} if a.liar else {})
+                  | network.counters(i) for i, a in enumerate(agents)],
         inbox=[dict(box.dropped) | {f"accepted_{k}": v for k, v in box.accepted.items()} for box in inboxes],
         final_plans=[(a.plan.positions.copy(), a.plan.velocities.copy()) if a.plan is not None else
                      (np.zeros((0, 2)), np.zeros((0, 2))) for a in agents],
@@ -186,3 +170,45 @@ def _trust_snapshot(agents: list[CarAgent], ids: list[int], own: np.ndarray):
             epsilon[a, b] = agent.trust.epsilon(peer, t, agent.epsilon_0(peer), agent.scenario.planner)
     return trust, transparency, epsilon
 
+
+
+
+class Network:
+    """The fleet's messages in simulated time: per receiver, a message is lost with
+    probability ``sim.message_loss`` and otherwise arrives ``message_latency_s`` plus
+    U(0, ``message_jitter_s``) after it was sent, in the order it was sent on each
+    sender-receiver link (as over one Zenoh session's reliable link). Draws come from
+    their own generator, so a run without faults is the same run it always was."""
+
+    def __init__(self, sim: SimConfig, n: int, rng: np.random.Generator):
+        self.sim, self.n, self.rng = sim, n, rng
+        self.queue: list[tuple[float, int, int, int, bytes]] = []  # (at, order, sender, receiver, payload)
+        self.order = 0
+        self.last = np.zeros((n, n))  # latest delivery time per link
+        self.lost = [0] * n
+        self.sent = [0] * n
+
+    def publish(self, sender: int, payload: bytes, now: float) -> None:
+        self.sent[sender] += 1
+        for receiver in range(self.n):
+            if receiver == sender:
+                continue
+            if self.sim.message_loss > 0.0 and self.rng.random() < self.sim.message_loss:
+                self.lost[receiver] += 1
+                continue
+            delay = self.sim.message_latency_s
+            if self.sim.message_jitter_s > 0.0:
+                delay += self.rng.uniform(0.0, self.sim.message_jitter_s)
+            at = max(now + delay, self.last[sender, receiver])
+            self.last[sender, receiver] = at
+            heapq.heappush(self.queue, (at, self.order, sender, receiver, payload))
+            self.order += 1
+
+    def due(self, now: float):
+        """(sender, receiver, payload) of every message due by ``now``, in order."""
+        while self.queue and self.queue[0][0] <= now + 1e-9:
+            _, _, sender, receiver, payload = heapq.heappop(self.queue)
+            yield sender, receiver, payload
+
+    def counters(self, car: int) -> dict[str, int]:
+        return {"messages_lost": self.lost[car]} if self.sim.message_loss > 0.0 else {}

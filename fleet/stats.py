@@ -62,13 +62,18 @@ def rate(flags: Sequence[bool]) -> dict:
 def cell(runs: list[dict]) -> dict:
     """The table's numbers for the runs of one cell (RUN dicts of fleet.experiments)."""
     liar = "liar_id" in runs[0]
+    honest_min = [r["honest_trust_min_after_settle"] for r in runs if r.get("honest_trust_min_after_settle") is not None]
     out = {
         "runs": len(runs),
         "breach_seeds_any": sum(1 for r in runs if r["breaches"]),
         "all_arrived": sum(1 for r in runs if all(r["reached_goal"])),
         "makespan_s": estimate([r["makespan_s"] for r in runs]),
+        "false_positive_rate": rate([t < FALSE_POSITIVE_TRUST for t in honest_min]),
+        "honest_trust_min": round(min(honest_min), 4) if honest_min else None,
     }
     if not liar:
+        out["min_clearance_m"] = round(min(min(c for i, row in enumerate(r["min_clearance"]) for j, c in enumerate(row)
+                                               if i != j) for r in runs), 4)
         return out
     lied = [r for r in runs if r.get("first_lie_s") is not None]
     delays = [r.get("detection_delay_s") for r in lied]
@@ -81,10 +86,6 @@ def cell(runs: list[dict]) -> dict:
         "detected_3s_rate": rate([d is not None and d <= DETECTION_LIMIT_S for d in delays]),
         "detection_s": estimate(delays),
         "never_detected": sum(1 for d in delays if d is None),
-        "false_positive_rate": rate([r["honest_trust_min_after_settle"] is not None
-                                     and r["honest_trust_min_after_settle"] < FALSE_POSITIVE_TRUST for r in runs]),
-        "honest_trust_min": round(min(r["honest_trust_min_after_settle"] for r in runs
-                                      if r["honest_trust_min_after_settle"] is not None), 4),
         "liar_distance_m": estimate([d for r in runs for d in r["liar_min_distance"]]),
     }
     return out

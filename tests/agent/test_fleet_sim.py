@@ -96,7 +96,7 @@ def test_a_car_with_a_skewed_clock_stays_trusted_under_loss_and_delay(lab):
     work: at these speeds a 0.3 s skew misplaces a plan by 0.10-0.14 m, just under the
     tolerance; at 0.6 m/s it would read as lying.)"""
     lossy = dataclasses.replace(
-        lab, sim=dataclasses.replace(lab.sim, message_loss=0.3, message_latency_s=0.05, message_jitter_s=0.02),
+        lab, sim=dataclasses.replace(lab.sim, message_loss=0.3, message_latency_s=0.03, message_jitter_s=0.04),
         cars=tuple(dataclasses.replace(c, clock_offset_s=0.3) if c.id == 2 else c for c in lab.cars))
 
     def trust_in_car_2(seed):
