@@ -113,7 +113,10 @@ def take_plan(view: PeerView, message: PlanMessage, now: float, track: Track | N
 
 
 def audit(view: PeerView, track: Track | None, record: Record, counters: Counter) -> None:
-    """Compare the peer's kept plans with what we have seen of it since; act on misses."""
+    """Compare the peer's kept plans with what we have seen of it since; act on misses.
+    Counts ``plans_rejected`` (off at the stamp), ``plans_failed_audit`` (a future that did
+    not come true, past reject(lag)) and ``peer_plans_unchecked`` (no observation at the
+    stamp to check against)."""
     config = view.config
     unverifiable = view.ledger.unverifiable
     for check in view.ledger.due(track):
@@ -131,7 +134,7 @@ def audit(view: PeerView, track: Track | None, record: Record, counters: Counter
                 view.accept(plan, check.claim.stamp, check.claim.received)
         elif check.rejected:
             counters["plans_failed_audit"] += 1  # its future did not come true: evidence, and counted
-    counters["plans_unverified"] += view.ledger.unverifiable - unverifiable
+    counters["peer_plans_unchecked"] += view.ledger.unverifiable - unverifiable
 
 
 def belief(view: PeerView, now: float) -> tuple[Plan, bool] | None:
