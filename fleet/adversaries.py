@@ -28,6 +28,7 @@ import time
 from ..agent.config import AttackConfig, Scenario
 from ..agent.scenario_files import load_scenario
 from . import stats
+from .command import configured
 from .experiments import (
     Progress,
     _pool,
@@ -160,6 +161,8 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.seeds < 1 or args.held_out_seeds < 1:
         parser.error("--seeds and --held-out-seeds must be at least 1")
+    for scene in args.scenes + args.held_out:
+        configured("trustfg experiment adversaries", lambda: load_scenario(scene))
     out = study_folder(args.out, "adversaries")
     started = time.perf_counter()
     seeds = list(range(args.seed, args.seed + args.seeds))

@@ -29,6 +29,7 @@ from ..agent.config import Scenario
 from ..agent.scenario_files import load_scenario
 from . import stats
 from .adversaries import run_summary
+from .command import configured
 from .experiments import (
     Progress,
     _pool,
@@ -76,7 +77,7 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("need --seeds >= 1, misinformation within (0, 1] and gains >= 1")
     out = study_folder(args.out, "transparency-sweep")
     started = time.perf_counter()
-    base = load_scenario(args.scene)
+    base = configured("trustfg experiment transparency-sweep", lambda: load_scenario(args.scene))
     seeds = list(range(args.seed, args.seed + args.seeds))
     made = fleets(args.gains)
     tasks = [(p, fleet, make(with_liar(base, p=p)), seed) for p in args.misinformation
