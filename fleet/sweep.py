@@ -75,9 +75,9 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.seeds < 1 or any(not 0 < p <= 1 for p in args.misinformation) or any(g < 1 for g in args.gains):
         parser.error("need --seeds >= 1, misinformation within (0, 1] and gains >= 1")
+    base = configured("trustfg experiment transparency-sweep", lambda: load_scenario(args.scene))
     out = study_folder(args.out, "transparency-sweep")
     started = time.perf_counter()
-    base = configured("trustfg experiment transparency-sweep", lambda: load_scenario(args.scene))
     seeds = list(range(args.seed, args.seed + args.seeds))
     made = fleets(args.gains)
     tasks = [(p, fleet, make(with_liar(base, p=p)), seed) for p in args.misinformation
