@@ -96,7 +96,7 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=10.0)
     parser.add_argument("--switch-ms", type=float, default=1.0, help="interpreter switch interval (car process: 1)")
     args = parser.parse_args()
-    print(f"replanning at 5 Hz beside a spinning probe and a 50 Hz ticker, switch interval {args.switch_ms} ms")
+    print(f"replanning at 5 Hz beside a sleeping probe and a 50 Hz ticker, switch interval {args.switch_ms} ms")
     print(f"{'peers':>5} {'replan p50 ms':>13} {'max':>6} {'probe wait p99.9 ms':>19} {'max':>6} "
           f"{'tick late p50 ms':>16} {'p99':>6} {'max':>6}")
     for n in args.peers:
