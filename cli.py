@@ -17,6 +17,7 @@ COMMANDS = {
     "mocap-sim": ("trustfg.mocap_sim.sim", "simulated cars and OptiTrack (NatNet) for a fleet config"),
     "faults": ("trustfg.fleet.faults", "the fault matrix: a fleet in network namespaces under each fault (root)"),
     "go": ("trustfg.fleet.go", "the operator's start signal for a fleet in the lab"),
+    "router": ("trustfg.fleet.router", "a Zenoh router (no zenohd needed) for cars that talk through one"),
     "dashboard": ("trustfg.dashboard.server", "the live web page of a fleet, or a recorded run replayed"),
     "record": ("trustfg.fleet.recording", "record a live fleet to an MCAP file"),
     "report": ("trustfg.dashboard.report", "figures and an HTML report from a recorded run"),

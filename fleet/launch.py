@@ -51,6 +51,7 @@ from ..agent.world import build_sdf
 from ..bridge import natnet
 from .bus import FleetBus
 from .command import configured, stop_on_signals
+from .cpu import CpuMeter
 from .fleet_sim import draw_departures
 from .recording import convert_run
 from .runs import RunRecord, arrivals, motion_summary
@@ -109,6 +110,8 @@ class Processes:
         self.children: dict[str, subprocess.Popen] = {}
         self.killed: set[str] = set()
         self.wrap = wrap or (lambda name, argv: argv)
+        self.cpu = CpuMeter()
+        self.cpu.watch("launcher", os.getpid())
 
     def start(self, name: str, args: list[str], log_path: Path, stdout=None) -> subprocess.Popen:
         log_file = open(log_path, "a")
@@ -116,6 +119,7 @@ class Processes:
         process = subprocess.Popen(argv, stdout=stdout or log_file, stderr=log_file, start_new_session=True, text=True)
         log_file.close()
         self.children[name] = process
+        self.cpu.watch(name, process.pid)
         return process
 
     def stop(self, names: list[str] | None = None) -> None:
@@ -278,6 +282,7 @@ def run(scenario: Scenario, out: Path, seed: int = 0, timeout_s: float | None = 
                 t_go = time.time() + START_LEAD_S
                 start = messages.StartMessage(1, time.time(), departures(scenario, seed, t_go))
                 bus.publish("start", messages.encode(start))
+                processes.cpu.sample(mark="go")
                 context = RunContext(scenario, out, processes, config_path, t_go, recorder)
                 print(f"trustfg sim: go (seed {seed}); recording to {out}", flush=True)
                 end = time.monotonic() + timeout_s
@@ -291,14 +296,18 @@ def run(scenario: Scenario, out: Path, seed: int = 0, timeout_s: float | None = 
                             pending.append((time.time() - t_go + float(again), action))
                             pending.sort(key=lambda item: item[0])
                     arrived = [i for i in ids if recorder.status.get(i) and recorder.status[i].at_goal]
+                    if arrived and "first_arrival" not in processes.cpu.marks:
+                        processes.cpu.sample(mark="first_arrival")
                     if len(arrived) == len(ids) and not pending:
                         break
                     if time.monotonic() > next_report:
                         next_report += 5.0
+                        processes.cpu.sample()
                         print(f"  t+{time.time() - t_go:5.1f}s: {len(arrived)}/{len(ids)} cars at their goals",
                               flush=True)
                     time.sleep(0.05)
                 crashed_early = processes.crashed()
+                processes.cpu.sample()
                 recorder.poll()
             finally:
                 processes.stop([name for name in processes.children if name.startswith("car")])
@@ -306,6 +315,7 @@ def run(scenario: Scenario, out: Path, seed: int = 0, timeout_s: float | None = 
                 recorder.close()
         processes.stop()
         summary = summarise(scenario, out, recorder, t_go, crashed_early)
+        summary["cpu"] = processes.cpu.summary("go", "first_arrival")
     finally:
         processes.stop()
     if context is not None and context.events:
@@ -407,6 +417,9 @@ def print_summary(summary: dict) -> None:
         f"{i}: {r['median']}/{r['p95']}" if r else f"{i}: -" for i, r in summary["replan_ms"].items()))
     print("commands (Hz, jitter p99 ms): " + "  ".join(
         f"{i}: {c['rate_hz']}/{c['jitter_ms_p99']}" if c else f"{i}: -" for i, c in summary["control"].items()))
+    print("cpu (share of one core, whole run / go to first arrival): " + "  ".join(
+        f"{name}: {c['share']}/{c.get('share_go_first_arrival')}" if c else f"{name}: -"
+        for name, c in summary.get("cpu", {}).items()))
     print(f"messages: {summary['messages']}")
     if "liar_id" in summary:
         print(f"liar {summary['liar_id']}: min distance from honest cars {summary['liar_min_distance']}")
