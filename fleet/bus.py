@@ -48,6 +48,7 @@ def zenoh_config(bus: BusConfig, extra_listen: tuple[str, ...] = ()) -> zenoh.Co
         if connect:
             config.insert_json5("connect/endpoints", json.dumps(connect))
         config.insert_json5("scouting/multicast/enabled", json.dumps(bus.multicast_scouting))
+        config.insert_json5("transport/unicast/max_links", json.dumps(bus.max_links))
         if bus.multicast_interface:
             config.insert_json5("scouting/multicast/interface", json.dumps(bus.multicast_interface))
     except Exception as exc:  # zenoh raises ZError and others for bad files or values
@@ -108,10 +109,13 @@ class FleetBus:
         fleet = self.fleet
         if self.car_id is not None:
             cid = self.car_id
-            self._publishers["plan"] = zext.declare_advanced_publisher(
-                session, key(fleet, cid, "plan"), cache=zext.CacheConfig(max_samples=1),
-                publisher_detection=True, sample_miss_detection=zext.MissDetectionConfig(heartbeat=0.5),
-                reliability=zenoh.Reliability.RELIABLE, congestion_control=zenoh.CongestionControl.DROP)
+            # Best effort: a plan is superseded within control.plan_period_s, so a lost one is
+            # replaced by the next rather than retransmitted (which, over TCP at heavy loss,
+            # held every later plan back for seconds). On a UDP link (``?rel=0``) it travels
+            # as one datagram.
+            self._publishers["plan"] = session.declare_publisher(
+                key(fleet, cid, "plan"), reliability=zenoh.Reliability.BEST_EFFORT, express=True,
+                congestion_control=zenoh.CongestionControl.DROP)
             self._publishers["trust"] = session.declare_publisher(
                 key(fleet, cid, "trust"), reliability=zenoh.Reliability.RELIABLE)
             self._publishers["pose"] = session.declare_publisher(
@@ -126,15 +130,7 @@ class FleetBus:
                 session, fleet_key(fleet, START), cache=zext.CacheConfig(max_samples=1), publisher_detection=True,
                 sample_miss_detection=zext.MissDetectionConfig(heartbeat=0.5))
         for kind in self.kinds:
-            pattern = every_car(fleet, kind)
-            if kind == "plan":
-                subscriber = zext.declare_advanced_subscriber(
-                    session, pattern, self._on_sample,
-                    history=zext.HistoryConfig(detect_late_publishers=True, max_samples=1),
-                    recovery=zext.RecoveryConfig(heartbeat=True), subscriber_detection=True)
-            else:
-                subscriber = session.declare_subscriber(pattern, self._on_sample)
-            self._entities.append(subscriber)
+            self._entities.append(session.declare_subscriber(every_car(fleet, kind), self._on_sample))
         self._entities.append(zext.declare_advanced_subscriber(
             session, fleet_key(fleet, START), self._on_sample,
             history=zext.HistoryConfig(detect_late_publishers=True, max_samples=1)))

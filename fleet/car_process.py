@@ -282,7 +282,7 @@ class CarProcess:
         control = self.scenario.control
         started_wait = self.clock()
         now = self.clock()
-        next_replan = now
+        next_replan = next_plan = now
         next_trust = now + control.trust_report_period_s * (self.car.id % 7) / 7
         next_pose = now
         next_status = now
@@ -305,13 +305,10 @@ class CarProcess:
                 if now - next_replan > control.replan_period_s:
                     next_replan = now + control.replan_period_s  # do not try to catch up
                 self._replan(now)
-                outgoing = self.agent.plan_message(now)
-                own = self.agent.tracks.get(self.car.id)
-                motion = own.motion() if own else None
-                if outgoing is not None and self.stuck and motion is not None:  # the truth: standing still
-                    outgoing = dataclasses.replace(outgoing, plan=standing(motion.position, now))
-                if outgoing is not None:
-                    bus.publish("plan", messages.encode(outgoing))
+                next_plan = now  # a new plan goes out at once
+            if now >= next_plan:  # and again every plan_period_s: a lost plan is soon replaced
+                next_plan = max(next_plan + control.plan_period_s, now)
+                self._publish_plan(bus, now)
             if now >= next_trust:
                 next_trust = max(next_trust + control.trust_report_period_s, now)
                 bus.publish("trust", messages.encode(self.agent.trust_message(now)))
@@ -340,6 +337,15 @@ class CarProcess:
         elif self.started:
             self.state = "stuck" if self.stuck else "driving"
         self._plan = self.agent.plan
+
+    def _publish_plan(self, bus: FleetBus, now: float) -> None:
+        outgoing = self.agent.plan_message(now)
+        own = self.agent.tracks.get(self.car.id)
+        motion = own.motion() if own else None
+        if outgoing is not None and self.stuck and motion is not None:  # the truth: standing still
+            outgoing = dataclasses.replace(outgoing, plan=standing(motion.position, now))
+        if outgoing is not None:
+            bus.publish("plan", messages.encode(outgoing))
 
     def _publish_pose(self, bus: FleetBus, natnet_client: NatNetClient, now: float) -> None:
         pose = self._own_pose(natnet_client)

@@ -90,7 +90,7 @@ def loopback_fleet(scenario: Scenario, cars: int | None, liar: int | None, misin
         ip = (car_ips or {}).get(car.id, infra_ip)
         wired.append(dataclasses.replace(
             car, link=f"udp://{infra_ip}:{free_port(socket.SOCK_DGRAM)}",
-            listen=(f"tcp/{ip}:{free_port()}",),
+            listen=(f"tcp/{ip}:{free_port()}", f"udp/{ip}:{free_port(socket.SOCK_DGRAM)}?rel=0"),
             misinformation=misinformation if lie else car.misinformation,
             false_testimony=lie or car.false_testimony))
     endpoints = tuple(e for car in wired for e in car.listen)
