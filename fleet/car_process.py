@@ -47,12 +47,12 @@ import numpy as np
 
 from ..agent import messages
 from ..agent.car_agent import CarAgent
-from ..agent.config import CarConfig, ConfigError, Scenario, parse_udp_address
+from ..agent.config import CarConfig, ConfigError, Scenario
 from ..agent.gp import standing
 from ..agent.scenario_files import load_scenario
 from ..agent.world import build_sdf
 from ..bridge import natnet
-from ..bridge.carlink import CommandSender, Flags
+from ..bridge.carlink import CommandSender, Flags, link_key
 from ..bridge.guard import speed_cap
 from ..bridge.natnet_client import NatNetClient, NatNetClientOptions
 from ..bridge.tracking import track
@@ -119,6 +119,7 @@ class CarProcess:
         self.car = car
         self.clock = clock
         self.natnet = natnet_options(scenario)
+        link_key(car)  # a missing or bad key is a config error now, not when driving
         self.stop = threading.Event()
         self.agent = CarAgent(car=car, scenario=scenario, sdf=build_sdf(scenario.world),
                               depart_at=math.inf)
@@ -257,10 +258,10 @@ class CarProcess:
 
     def run(self, stats_path: Path | None = None) -> int:
         scenario, car = self.scenario, self.car
-        host, port = parse_udp_address(car.link, f"cars[id={car.id}].link")
         sys.setswitchinterval(SWITCH_INTERVAL_S)
-        log.info("car %d: NatNet %s at %s, link %s", car.id, scenario.natnet.mode, scenario.natnet.server, car.link)
-        with CommandSender(car.id, (host, port), stamp_clock=self.clock) as sender, \
+        log.info("car %d: NatNet %s at %s, link %s (version %d)", car.id, scenario.natnet.mode, scenario.natnet.server,
+                 car.link, car.link_version)
+        with CommandSender.for_car(car, stamp_clock=self.clock) as sender, \
                 NatNetClient(self.natnet, on_frame=self._on_frame) as natnet_client, \
                 FleetBus(scenario.bus, scenario.fleet, car.id, listen=car.listen, clock=self.clock) as bus:
             controller = threading.Thread(target=self._control_loop, args=(natnet_client, sender),

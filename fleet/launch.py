@@ -52,6 +52,7 @@ from ..bridge import natnet
 from .bus import FleetBus
 from .command import configured, stop_on_signals
 from .fleet_sim import draw_departures
+from .link_keys import with_link_keys
 from .recording import convert_run
 from .runs import RunRecord, arrivals, motion_summary
 
@@ -238,6 +239,7 @@ def run(scenario: Scenario, out: Path, seed: int = 0, timeout_s: float | None = 
     ``schedule``: (seconds after the go, action) -- faults injected during the run."""
     stop = stop or threading.Event()
     out.mkdir(parents=True, exist_ok=True)
+    scenario = with_link_keys(scenario, out / "keys")
     config_path = out / "fleet.toml"
     config_path.write_text(dump_scenario(scenario))
     timeout_s = timeout_s or scenario.sim.timeout_s + 15.0
