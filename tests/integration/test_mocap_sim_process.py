@@ -73,7 +73,7 @@ def truth_rows(path, car_id):
         return [row for row in csv.DictReader(f) if int(row["car_id"]) == car_id]
 
 
-@pytest.mark.parametrize("version", ["3.0", "3.1", "4.0", "4.1"])
+@pytest.mark.parametrize("version", list(natnet.STREAM_VERSIONS))
 def test_bridge_reads_mocap_sim_poses_in_every_natnet_version(two_cars, tmp_path, version):
     fleet, path = two_cars
     process = start_mocap(path, tmp_path / "truth.csv", "--natnet-version", version)
