@@ -166,6 +166,13 @@ class FleetBus:
             self.counters["close_timed_out"] += 1
             log.warning("the Zenoh session did not close within %.1f s; leaving it to the OS", timeout_s)
 
+    def links(self) -> list[tuple[str, str, bool]]:
+        """(local, remote, reliable) of every Zenoh link this session has now."""
+        if self._session is None:
+            return []
+        return [(str(link.src), str(link.dst), link.reliability == zenoh.Reliability.RELIABLE)
+                for link in self._session.info.links()]
+
     # --- sending ---------------------------------------------------------------------------
 
     def publish(self, kind: str, payload: bytes) -> None:
