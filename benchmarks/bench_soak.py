@@ -103,9 +103,11 @@ def verdicts(series: dict[str, list[dict]], cars: dict[str, dict], minutes: floa
             late_ok = False
         good = growth <= RSS_GROWTH_MAX and fd_growth <= 0 and late_ok
         ok &= good
+        verdict = "" if good else ("   <-- run too short for the lateness verdict" if late_early == "-"
+                                   else "   <-- grows")
         lines.append(f"{name:<10} {first['rss_kb'] / 1024:>12.1f} {last['rss_kb'] / 1024:>10.1f} {growth:>+7.1%} "
                      f"{first['fds']:>9} {last['fds']:>7} {last['threads']:>7} {late_early:>18} {late_late:>13}"
-                     + ("" if good else "   <-- grows"))
+                     + verdict)
     return lines, ok
 
 
