@@ -16,7 +16,7 @@ Verdicts, per process, measured from the end of the first minute after the go:
                   1 ms or 25 % worse, whichever is larger
 
 Prints a table and writes DIR/soak.json (every sample). Exit status 0 when every verdict
-holds. Run it alone on the machine (``flock /work/heavy.lock ...`` on a shared one).
+holds. Run it alone on the machine: other load shows up as lateness.
 """
 
 from __future__ import annotations
