@@ -16,6 +16,7 @@ import struct
 
 import pytest
 
+from tests.bridge.test_natnet_client import FakeServer, server_info, unicast_options
 from tests.conftest import wait_for
 from trustfg.bridge import natnet as nn
 from trustfg.bridge.natnet import V4_1, V4_2, MessageId, NatNetError, Version
@@ -130,3 +131,24 @@ def test_mocap_sim_serves_4_2_and_the_client_learns_names_and_ids():
             assert client.latest(7).body.orientation == pytest.approx(ROTATION)
             assert wait_for(lambda: client.body_ids() == {"car7": 7, "car9": 9}, 5.0), client.body_ids()
             assert client.stats().rejected_total == 0
+
+
+def test_a_server_announcing_4_4_is_read_with_the_4_2_layout_and_its_model_kept():
+    """Negotiation: the client announces 4.2, takes the server's 4.4 (the SDK's "4.2 to
+    current"), decodes its frames and its model definitions with the 4.2 layout."""
+    def reply(packet, sender):
+        message = nn.peek_message_id(packet)
+        if message == MessageId.CONNECT:
+            assert nn.decode_connect(nn.unpack_header(packet)[1]).natnet_version == V4_2
+            return [server_info(Version(4, 4))]
+        if message == MessageId.REQUEST_MODELDEF:
+            return [nn.pack_header(MessageId.MODELDEF, modeldef_42_payload())]
+        return []
+
+    with FakeServer(reply) as server:
+        with NatNetClient(unicast_options(server)) as client:
+            assert client.version == Version(4, 4)
+            assert wait_for(lambda: client.body_ids() == {"car7": 7}, 5.0)
+            server.send(nn.pack_header(MessageId.FRAMEOFDATA, frame_42_payload()), client.local_address)
+            assert client.wait_for_frames(1, timeout_s=5.0)
+            assert client.latest(7).body.position == pytest.approx((1.0, 0.05, -2.0))
