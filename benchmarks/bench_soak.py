@@ -5,7 +5,8 @@
 Starts ``trustfg sim --laps 100000 --timeout MINUTES*60`` (mocap-sim, four car processes,
 the dashboard, the launcher recording every message) and samples every process of the run
 from /proc every ``--interval`` seconds: resident memory (VmRSS), open file descriptors
-(/proc/PID/fd) and threads. The car processes report the p99 lateness of their 50 Hz
+(/proc/PID/fd), threads and CPU time, and the whole machine's busy time (/proc/stat), so
+load from outside the run is told apart from the run's own. The car processes report the p99 lateness of their 50 Hz
 control ticks minute by minute (car_N.json, ``late_ms_p99_by_minute``).
 
 Verdicts, per process, measured from the end of the first minute after the go:
@@ -69,14 +70,27 @@ def role(pid: int) -> str | None:
     return rest[0] if rest else None
 
 
+TICK_S = 1.0 / os.sysconf("SC_CLK_TCK")
+
+
 def sample(pid: int) -> dict | None:
     try:
         status = Path(f"/proc/{pid}/status").read_text()
+        stat = Path(f"/proc/{pid}/stat").read_text()
         fds = len(os.listdir(f"/proc/{pid}/fd"))
     except OSError:
         return None
     fields = dict(line.split(":", 1) for line in status.splitlines() if ":" in line)
-    return {"rss_kb": int(fields["VmRSS"].split()[0]), "fds": fds, "threads": int(fields["Threads"])}
+    utime, stime = map(int, stat.rsplit(")", 1)[1].split()[11:13])  # fields 14 and 15 of proc(5)
+    return {"rss_kb": int(fields["VmRSS"].split()[0]), "fds": fds, "threads": int(fields["Threads"]),
+            "cpu_s": round((utime + stime) * TICK_S, 2)}
+
+
+def machine_busy_s() -> float:
+    """CPU seconds the whole machine spent busy (all cores), from /proc/stat."""
+    values = list(map(int, Path("/proc/stat").read_text().split("\n", 1)[0].split()[1:]))
+    idle = values[3] + values[4]  # idle, iowait
+    return (sum(values[:8]) - idle) * TICK_S
 
 
 def at(samples: list[dict], t: float) -> dict:
@@ -111,6 +125,21 @@ def verdicts(series: dict[str, list[dict]], cars: dict[str, dict], minutes: floa
     return lines, ok
 
 
+def load_by_window(series: dict[str, list[dict]], machine: list[dict], window_s: float = 300.0) -> list[str]:
+    """Per 5 minutes: CPU the run's processes used and what the whole machine used (in cores):
+    more busy than ours is someone else's load, which shows up as lateness."""
+    lines = [f"{'minutes':>9} {'ours (cores)':>12} {'machine (cores)':>15}"]
+    start = 0.0
+    while start + window_s <= machine[-1]["t"] + 1e-9:
+        a, b = at(machine, start), at(machine, start + window_s)
+        span = max(b["t"] - a["t"], 1e-9)
+        ours = sum(at(v, start + window_s)["cpu_s"] - at(v, start)["cpu_s"] for v in series.values())
+        lines.append(f"{start / 60:>4.0f}-{(start + window_s) / 60:<4.0f} {ours / span:>12.2f} "
+                     f"{(b['busy_s'] - a['busy_s']) / span:>15.2f}")
+        start += window_s
+    return lines
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--minutes", type=float, default=30.0, help="how long the cars drive (default 30)")
@@ -130,14 +159,15 @@ def main() -> int:
     try:
         while sim.poll() is None and time.monotonic() - t0 < args.minutes * 60 - 5:
             t = time.monotonic() - t0
+            series.setdefault("machine", []).append({"t": round(t, 1), "busy_s": round(machine_busy_s(), 2)})
             for pid in [sim.pid, *descendants(sim.pid)]:
                 name = "sim" if pid == sim.pid else role(pid)
                 if name is not None and (s := sample(pid)) is not None:
                     series.setdefault(name, []).append({"t": round(t, 1)} | s)
             if int(t) % 300 < args.interval:
                 print(f"soak: {t / 60:5.1f} min, " + ", ".join(
-                    f"{n} {v[-1]['rss_kb'] / 1024:.0f} MB/{v[-1]['fds']} fds" for n, v in sorted(series.items())),
-                    flush=True)
+                    f"{n} {v[-1]['rss_kb'] / 1024:.0f} MB/{v[-1]['fds']} fds" for n, v in sorted(series.items())
+                    if n != "machine"), flush=True)
             time.sleep(max(0.0, args.interval - (time.monotonic() - t0 - t)))
         for line in sim.stdout:  # the launcher stops everything and summarises
             pass
@@ -149,7 +179,9 @@ def main() -> int:
     cars = {}
     for path in (args.out / "run").glob("car_*.json"):
         cars[f"car {path.stem.split('_')[1]}"] = json.loads(path.read_text()).get("control", {})
+    machine = series.pop("machine")
     lines, ok = verdicts(series, cars, args.minutes)
+    lines += load_by_window(series, machine)
     (args.out / "soak.json").write_text(json.dumps({"minutes": args.minutes, "series": series, "cars": cars}))
     print("\n".join(lines))
     summary = json.loads((args.out / "run" / "summary.json").read_text())
