@@ -87,6 +87,7 @@ class FleetBus:
         """Liveliness of every car process seen: True while its token is up."""
         self._session: zenoh.Session | None = None
         self._publishers: dict[str, object] = {}
+        self._reliable_plan = None
         self._entities: list = []
 
     # --- lifecycle -------------------------------------------------------------------------
@@ -109,13 +110,20 @@ class FleetBus:
         fleet = self.fleet
         if self.car_id is not None:
             cid = self.car_id
-            # Best effort: a plan is superseded within control.plan_period_s, so a lost one is
-            # replaced by the next rather than retransmitted (which, over TCP at heavy loss,
-            # held every later plan back for seconds). On a UDP link (``?rel=0``) it travels
-            # as one datagram.
+            # Plans go two ways. Best effort (on a UDP link, ``?rel=0``, where the peers have
+            # one), repeated every control.plan_period_s: a lost plan is replaced by the next
+            # instead of retransmitted, which over TCP at heavy loss held every later plan back
+            # for seconds. And reliable, each new plan once, through an advanced publisher with
+            # a cache of 1: late joiners and peers back from a partition get the latest at once
+            # (the best-effort path alone took seconds to resume). Whichever copy arrives first
+            # is taken; the other is dropped by the Inbox as a repeat of its sequence number.
             self._publishers["plan"] = session.declare_publisher(
                 key(fleet, cid, "plan"), reliability=zenoh.Reliability.BEST_EFFORT, express=True,
                 congestion_control=zenoh.CongestionControl.DROP)
+            self._reliable_plan = zext.declare_advanced_publisher(
+                session, key(fleet, cid, "plan"), cache=zext.CacheConfig(max_samples=1),
+                publisher_detection=True, sample_miss_detection=zext.MissDetectionConfig(heartbeat=0.5),
+                reliability=zenoh.Reliability.RELIABLE, congestion_control=zenoh.CongestionControl.DROP)
             self._publishers["trust"] = session.declare_publisher(
                 key(fleet, cid, "trust"), reliability=zenoh.Reliability.RELIABLE)
             self._publishers["pose"] = session.declare_publisher(
@@ -130,7 +138,15 @@ class FleetBus:
                 session, fleet_key(fleet, START), cache=zext.CacheConfig(max_samples=1), publisher_detection=True,
                 sample_miss_detection=zext.MissDetectionConfig(heartbeat=0.5))
         for kind in self.kinds:
-            self._entities.append(session.declare_subscriber(every_car(fleet, kind), self._on_sample))
+            pattern = every_car(fleet, kind)
+            if kind == "plan":
+                subscriber = zext.declare_advanced_subscriber(
+                    session, pattern, self._on_sample,
+                    history=zext.HistoryConfig(detect_late_publishers=True, max_samples=1),
+                    recovery=zext.RecoveryConfig(heartbeat=True), subscriber_detection=True)
+            else:
+                subscriber = session.declare_subscriber(pattern, self._on_sample)
+            self._entities.append(subscriber)
         self._entities.append(zext.declare_advanced_subscriber(
             session, fleet_key(fleet, START), self._on_sample,
             history=zext.HistoryConfig(detect_late_publishers=True, max_samples=1)))
@@ -144,9 +160,11 @@ class FleetBus:
         session, self._session = self._session, None
         if session is None:
             return
-        entities = [*self._entities, *self._publishers.values()]
+        entities = [*self._entities, *self._publishers.values(),
+                    *([self._reliable_plan] if self._reliable_plan is not None else [])]
         self._entities.clear()
         self._publishers.clear()
+        self._reliable_plan = None
 
         def close_all() -> None:
             for entity in entities:
@@ -175,13 +193,16 @@ class FleetBus:
 
     # --- sending ---------------------------------------------------------------------------
 
-    def publish(self, kind: str, payload: bytes) -> None:
-        """Publish one of our own messages (kind in KINDS, or "start" for an observer)."""
+    def publish(self, kind: str, payload: bytes, *, repeat: bool = False) -> None:
+        """Publish one of our own messages (kind in KINDS, or "start" for an observer). A new
+        plan goes best effort and reliably; a ``repeat`` of the latest, best effort only."""
         publisher = self._publishers.get(kind)
         if publisher is None:
             raise BusError(f"this bus cannot publish {kind!r} (car_id={self.car_id})")
         try:
             publisher.put(payload)
+            if kind == "plan" and not repeat and self._reliable_plan is not None:
+                self._reliable_plan.put(payload)
             self.counters[f"sent_{kind}"] += 1
         except Exception as exc:  # a closed session or a full queue must not kill the loop
             self.counters[f"send_failed_{kind}"] += 1

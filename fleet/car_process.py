@@ -323,10 +323,11 @@ class CarProcess:
                 if now - next_replan > control.replan_period_s:
                     next_replan = now + control.replan_period_s  # do not try to catch up
                 self._replan(now)
-                next_plan = now  # a new plan goes out at once
-            if now >= next_plan:  # and again every plan_period_s: a lost plan is soon replaced
+                next_plan = now + control.plan_period_s
+                self._publish_plan(bus, now, repeat=False)  # a new plan goes out at once, both ways
+            if now >= next_plan:  # and again every plan_period_s, best effort: a lost plan is soon replaced
                 next_plan = max(next_plan + control.plan_period_s, now)
-                self._publish_plan(bus, now)
+                self._publish_plan(bus, now, repeat=True)
             if now >= next_trust:
                 next_trust = max(next_trust + control.trust_report_period_s, now)
                 bus.publish("trust", messages.encode(self.agent.trust_message(now)))
@@ -365,14 +366,14 @@ class CarProcess:
         """At the goal of the last lap."""
         return self.agent.at_goal and self.laps.done
 
-    def _publish_plan(self, bus: FleetBus, now: float) -> None:
+    def _publish_plan(self, bus: FleetBus, now: float, repeat: bool) -> None:
         outgoing = self.agent.plan_message(now)
         own = self.agent.tracks.get(self.car.id)
         motion = own.motion() if own else None
         if outgoing is not None and self.stuck and motion is not None:  # the truth: standing still
             outgoing = dataclasses.replace(outgoing, plan=standing(motion.position, now))
         if outgoing is not None:
-            bus.publish("plan", messages.encode(outgoing))
+            bus.publish("plan", messages.encode(outgoing), repeat=repeat)
 
     def _publish_pose(self, bus: FleetBus, natnet_client: NatNetClient, now: float) -> None:
         pose = self._own_pose(natnet_client)

@@ -64,6 +64,21 @@ def test_with_a_udp_endpoint_peers_get_a_best_effort_link_and_plans_arrive():
                                  any(r.kind == "plan" for r in got))[2], 5.0)
 
 
+def test_a_late_joiner_gets_the_latest_new_plan_at_once_and_repeats_go_best_effort():
+    a = endpoint()
+    plan = messages.encode(messages.PlanMessage(1, 7, time.time(), Plan(0.0, 0.5, np.zeros((3, 2)),
+                                                                        np.zeros((3, 2))), (1.0, 1.0)))
+    with FleetBus(BusConfig(listen=(a,)), FLEET, 1) as one:
+        one.publish("plan", b"old")
+        one.publish("plan", plan)
+        one.publish("plan", b"a repeat, best effort only", repeat=True)
+        with FleetBus(BusConfig(listen=(endpoint(),), connect=(a,)), FLEET, 3) as late:
+            got = []
+            assert wait_for(lambda: (got.extend(late.drain()), any(r.kind == "plan" for r in got))[1], 5.0)
+            plans = [r.payload for r in got if r.kind == "plan"]
+            assert plans[-1] == plan and b"old" not in plans  # the reliable path's cache: the latest
+
+
 def test_liveliness_reports_a_departed_car():
     a = endpoint()
     with FleetBus(BusConfig(listen=(a,)), FLEET, None) as observer:
