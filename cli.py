@@ -20,6 +20,7 @@ COMMANDS = {
     "router": ("trustfg.fleet.router", "a Zenoh router (no zenohd needed) for cars that talk through one"),
     "dashboard": ("trustfg.dashboard.server", "the live web page of a fleet, or a recorded run replayed"),
     "record": ("trustfg.fleet.recording", "record a live fleet to an MCAP file"),
+    "foxglove": ("trustfg.dashboard.foxglove_live", "serve the live fleet to Foxglove (WebSocket protocol)"),
     "report": ("trustfg.dashboard.report", "figures and an HTML report from a recorded run"),
     "secure-config": ("trustfg.fleet.security", "Zenoh mutual-TLS and access-control config for one fleet member"),
     "experiment": ("trustfg.fleet.experiments", "run the paper's experiments in the in-process simulation"),

@@ -1,7 +1,7 @@
 """``trustfg sim``: the main job -- a whole fleet as separate OS processes on one machine.
 
     trustfg sim [--scenario FILE] [--cars N] [--liar ID --misinformation P] [--out DIR]
-                [--seed S] [--timeout S] [--natnet-version V] [--mocap ARG ...]
+                [--seed S] [--timeout S] [--laps K] [--natnet-version V] [--mocap ARG ...]
 
 1. Resolves a fleet config for loopback: a free UDP port per car link and for NatNet
    (unicast), a free TCP port per process for Zenoh (explicit endpoints, multicast
@@ -53,6 +53,8 @@ from .bus import FleetBus
 from .command import configured, stop_on_signals
 from .cpu import CpuMeter
 from .fleet_sim import draw_departures
+from .laps import final_legs
+from .link_keys import with_link_keys
 from .recording import convert_run
 from .runs import RunRecord, arrivals, motion_summary
 
@@ -91,7 +93,7 @@ def loopback_fleet(scenario: Scenario, cars: int | None, liar: int | None, misin
         ip = (car_ips or {}).get(car.id, infra_ip)
         wired.append(dataclasses.replace(
             car, link=f"udp://{infra_ip}:{free_port(socket.SOCK_DGRAM)}",
-            listen=(f"tcp/{ip}:{free_port()}",),
+            listen=(f"tcp/{ip}:{free_port()}", f"udp/{ip}:{free_port(socket.SOCK_DGRAM)}?rel=0"),
             misinformation=misinformation if lie else car.misinformation,
             false_testimony=lie or car.false_testimony))
     endpoints = tuple(e for car in wired for e in car.listen)
@@ -242,9 +244,10 @@ def run(scenario: Scenario, out: Path, seed: int = 0, timeout_s: float | None = 
     ``schedule``: (seconds after the go, action) -- faults injected during the run."""
     stop = stop or threading.Event()
     out.mkdir(parents=True, exist_ok=True)
+    scenario = with_link_keys(scenario, out / "keys")
     config_path = out / "fleet.toml"
     config_path.write_text(dump_scenario(scenario))
-    timeout_s = timeout_s or scenario.sim.timeout_s + 15.0
+    timeout_s = timeout_s or scenario.sim.timeout_s * scenario.control.laps + 15.0
     processes = Processes(wrap)
     observer_endpoint = f"tcp/{infra_ip}:{free_port()}"
     pending = sorted(schedule, key=lambda item: item[0])
@@ -314,7 +317,7 @@ def run(scenario: Scenario, out: Path, seed: int = 0, timeout_s: float | None = 
                 recorder.poll()
                 recorder.close()
         processes.stop()
-        summary = summarise(scenario, out, recorder, t_go, crashed_early)
+        summary = summarise(final_legs(scenario), out, recorder, t_go, crashed_early)
         summary["cpu"] = processes.cpu.summary("go", "first_arrival")
     finally:
         processes.stop()
@@ -446,6 +449,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=None, help="run folder (default runs/sim-<time>)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the departures and cruise speeds")
     parser.add_argument("--timeout", type=float, default=None, help="seconds after the start (default: scenario's + 15)")
+    parser.add_argument("--laps", type=int, default=None,
+                        help="drive every route K times, back and forth (default: the scenario's control.laps, 1)")
     parser.add_argument("--natnet-version", choices=natnet.STREAM_VERSIONS, default=natnet.DEFAULT_STREAM_VERSION,
                         help="NatNet version mocap-sim streams (default %(default)s)")
     parser.add_argument("--no-dashboard", action="store_true", help="do not start the dashboard")
@@ -457,8 +462,12 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("--cars must be at least 1")
     if not 0.0 <= args.misinformation <= 1.0:
         parser.error("--misinformation must be within [0, 1]")
+    if args.laps is not None and args.laps < 1:
+        parser.error("--laps must be at least 1")
     fleet = configured("trustfg sim", lambda: loopback_fleet(
         load_scenario(args.scenario or default_scenario(args.cars)), args.cars, args.liar, args.misinformation))
+    if args.laps is not None:
+        fleet = dataclasses.replace(fleet, control=dataclasses.replace(fleet.control, laps=args.laps))
     out = args.out or Path("runs") / time.strftime("sim-%Y%m%d-%H%M%S")
     stop = stop_on_signals(threading.Event())
     try:
