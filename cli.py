@@ -21,7 +21,8 @@ COMMANDS = {
     "record": ("trustfg.fleet.recording", "record a live fleet to an MCAP file"),
     "report": ("trustfg.dashboard.report", "figures and an HTML report from a recorded run"),
     "secure-config": ("trustfg.fleet.security", "Zenoh mutual-TLS and access-control config for one fleet member"),
-    "experiment": ("trustfg.fleet.experiments", "run the paper's experiments in the in-process simulation"),
+    "experiment": ("trustfg.fleet.experiments", "run the paper's experiments (and the scenario bank) in-process"),
+    "scenario": ("trustfg.fleet.scenes", "generate a scene from a seed, or check a scene's starts and goals"),
 }
 
 
