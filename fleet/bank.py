@@ -242,19 +242,23 @@ def machine() -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="trustfg experiment bank", description=__doc__.split("\n")[0],
-                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    parser.add_argument("--scenes", nargs="+", default=list(BANK), help="scene names or files")
-    parser.add_argument("--seed", type=int, default=0, help="first seed")
-    parser.add_argument("--seeds", type=int, default=100, help="seeds per scene")
-    parser.add_argument("--methods", nargs="+", default=list(METHODS), choices=list(METHODS))
-    parser.add_argument("--fresh", type=int, default=0, help="random-field scenes from fresh generator seeds")
-    parser.add_argument("--fresh-cars", type=int, default=6, help="cars in each fresh scene")
-    parser.add_argument("--fresh-seeds", type=int, default=5, help="seeds per fresh scene")
+    parser = argparse.ArgumentParser(prog="trustfg experiment bank", description=__doc__.split("\n")[0])
+    parser.add_argument("--scenes", nargs="+", default=list(BANK), metavar="SCENE",
+                        help="scene names or files (default: the bank, " + " ".join(BANK) + ")")
+    parser.add_argument("--seed", type=int, default=0, help="first seed (default 0)")
+    parser.add_argument("--seeds", type=int, default=100, help="seeds per scene (default 100)")
+    parser.add_argument("--methods", nargs="+", default=list(METHODS), choices=list(METHODS),
+                        help="what drives the cars (default: all of " + ", ".join(METHODS) + ")")
+    parser.add_argument("--fresh", type=int, default=0,
+                        help="add this many random-field scenes from generator seeds drawn now (default 0)")
+    parser.add_argument("--fresh-cars", type=int, default=6, help="cars in each fresh scene (default 6)")
+    parser.add_argument("--fresh-seeds", type=int, default=5, help="seeds per fresh scene (default 5)")
     parser.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
-                        help="change a config value of every scene and method (repeatable)")
-    parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="parallel runs")
-    parser.add_argument("--out", type=Path, default=None, help="output folder (default runs/bank-<time>)")
+                        help="change a config value of every scene and method (repeatable; TOML values)")
+    parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
+                        help="parallel runs (default: one per core)")
+    parser.add_argument("--out", type=Path, default=None,
+                        help="output folder (default runs/bank-<time>); an existing one carries on where it stopped")
     parser.add_argument("--no-figures", action="store_true", help="skip the PNG figure")
     args = parser.parse_args(argv)
     if args.seeds < 1 or args.fresh < 0 or args.fresh_seeds < 1:
