@@ -67,16 +67,18 @@ def cell(runs: list[dict]) -> dict:
 
 
 def summarise(runs: list[dict]) -> list[dict]:
-    """One cell per (group, scene, method), then per (group, method) over all its scenes."""
+    """Per group (the bank, then the fresh scenes): one cell per (scene, method), then one
+    per method over all the group's scenes."""
     cells = []
     keys = sorted({(r["group"], r["scene"], r["method"]) for r in runs}, key=lambda k: _order(runs, k))
-    for group, scene, method in keys:
-        chosen = [r for r in runs if (r["group"], r["scene"], r["method"]) == (group, scene, method)]
-        cells.append({"group": group, "scene": scene, "method": method} | cell(chosen))
-    for group, method in dict.fromkeys((g, m) for g, _, m in keys):
-        chosen = [r for r in runs if (r["group"], r["method"]) == (group, method)]
-        scenes = len({r["scene"] for r in chosen})
-        cells.append({"group": group, "scene": f"all {scenes} {group} scenes", "method": method} | cell(chosen))
+    for group in dict.fromkeys(g for g, _, _ in keys):
+        for _, scene, method in (k for k in keys if k[0] == group):
+            chosen = [r for r in runs if (r["group"], r["scene"], r["method"]) == (group, scene, method)]
+            cells.append({"group": group, "scene": scene, "method": method} | cell(chosen))
+        for method in dict.fromkeys(m for g, _, m in keys if g == group):
+            chosen = [r for r in runs if (r["group"], r["method"]) == (group, method)]
+            scenes = len({r["scene"] for r in chosen})
+            cells.append({"group": group, "scene": f"all {scenes} {group} scenes", "method": method} | cell(chosen))
     return cells
 
 
@@ -107,6 +109,8 @@ def markdown(report: dict) -> str:
         "(s) are medians over the successful runs.",
         "",
     ]
+    lines += ["Runs that reached every goal safely / runs (failures: b breach, c contact, d deadlock, t timeout), "
+              "least clearance between cars:", "", overview(report)]
     header = ("| scene | method | runs | success % | breach % | contact % | deadlock % | timeout % "
               "| least clearance min / median | obstacle clearance min | makespan | flowtime | replan ms |")
     groups = list(dict.fromkeys(c["group"] for c in report["summary"]))
@@ -123,6 +127,29 @@ def markdown(report: dict) -> str:
                 + f" | {_median(c['makespan_s'])} | {_median(c['flowtime_s'])} | {_median(c['replan_ms_median'], 2)} |")
         lines.append("")
     return "\n".join(lines)
+
+
+def overview(report: dict) -> str:
+    """One line per scene, one cell per method: runs that succeeded, the failures by kind
+    (b breach, c contact, d deadlock, t timeout), and the least clearance between cars."""
+    methods = list(report["methods"])
+    lines = ["| scene | " + " | ".join(report["methods"][m]["label"] for m in methods) + " |",
+             "|" + " --- |" * (len(methods) + 1)]
+    scenes = list(dict.fromkeys(c["scene"] for c in report["summary"]))
+    for scene in scenes:
+        found = {c["method"]: c for c in report["summary"] if c["scene"] == scene}
+        cells = []
+        for method in methods:
+            c = found.get(method)
+            if c is None:
+                cells.append("-")
+                continue
+            counts = {o: round(c["rates"][o][0] * c["runs"]) for o in OUTCOMES}
+            failed = " ".join(f"{counts[o]}{o[0]}" for o in OUTCOMES[1:] if counts[o])
+            cells.append(f"{counts['success']}/{c['runs']}" + (f" ({failed})" if failed else "")
+                         + f", {c['least_clearance_m']['min']:.3f} m")
+        lines.append(f"| {scene} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
 
 
 def _rate(rate: list[float], n: int) -> str:
