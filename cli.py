@@ -23,7 +23,8 @@ COMMANDS = {
     "foxglove": ("trustfg.dashboard.foxglove_live", "serve the live fleet to Foxglove (WebSocket protocol)"),
     "report": ("trustfg.dashboard.report", "figures and an HTML report from a recorded run"),
     "secure-config": ("trustfg.fleet.security", "Zenoh mutual-TLS and access-control config for one fleet member"),
-    "experiment": ("trustfg.fleet.experiments", "run the paper's experiments in the in-process simulation"),
+    "experiment": ("trustfg.fleet.experiments", "run the paper's experiments (and the scenario bank) in-process"),
+    "scenario": ("trustfg.fleet.scenes", "generate a scene from a seed, or check a scene's starts and goals"),
 }
 
 

@@ -126,6 +126,9 @@ class TrustConfig:
     """g(tau) ranges from 1 (tau >= tau_full) to this (tau <= tau_floor)."""
     tau_full: float = 0.9
     tau_floor: float = 0.5
+    epsilon_gain_fixed: float = 1.0
+    """g for every peer when the transparency factor is off (planner.transparency = false):
+    1 keeps eps_0 from everyone; the bank's "wide" baseline keeps 2 eps_0."""
 
     def validate(self, path: str) -> None:
         if not 0.0 < self.forgetting <= 1.0:
@@ -136,8 +139,8 @@ class TrustConfig:
             raise ConfigError(f"{path}.tau_floor/tau_full: need 0 <= tau_floor < tau_full <= 1")
         if self.failure_weight <= 0 or self.consistency_failure_weight <= 0:
             raise ConfigError(f"{path}.failure_weight/consistency_failure_weight: must be > 0")
-        if self.epsilon_gain_max < 1.0:
-            raise ConfigError(f"{path}.epsilon_gain_max: must be >= 1")
+        if self.epsilon_gain_max < 1.0 or self.epsilon_gain_fixed < 1.0:
+            raise ConfigError(f"{path}.epsilon_gain_max/epsilon_gain_fixed: must be >= 1")
         for name in (
             "transparency_tolerance_m", "plan_reject_m", "consistency_tolerance_mps2",
             "evidence_period_s", "stale_after_s", "testimony_deviation",
