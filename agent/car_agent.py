@@ -201,11 +201,11 @@ class CarAgent:
                 continue
             view = self.peers.get(peer)
             believed = belief(view, now) if view else None
-            widest = self.epsilon_0(peer) * max(trust.epsilon_gain_max, planner.uniform_epsilon_gain)
+            widest = self.epsilon_0(peer) * max(trust.epsilon_gain_max, trust.epsilon_gain_fixed)
             if believed is not None:
                 plan, verified = believed
                 if verified or not trust.reject_plans:
-                    epsilon = self.trust.epsilon(peer, now, self.epsilon_0(peer), planner)
+                    epsilon = self.trust.epsilon(peer, now, self.epsilon_0(peer), planner.transparency)
                 else:
                     self.counters["peers_unverified"] += 1  # not checked yet: not as if trusted
                     epsilon = widest
@@ -267,6 +267,7 @@ class CarAgent:
             return None
         self.plan = result.plan
         self.last_result = result
+        self.counters["peers_out_of_reach"] += result.peers_out_of_reach
         self.replan_ms.append(result.time_ms)
         return result
 
@@ -319,7 +320,7 @@ class CarAgent:
         return {car_id: m for car_id, m in seen.items() if m is not None}
 
     def trust_message(self, now: float) -> TrustReport:
-        report = self.trust.report(self.car.id, self.next_seq("trust"), now, self.epsilon_0, self.scenario.planner)
+        report = self.trust.report(self.car.id, self.next_seq("trust"), now, self.epsilon_0, self.scenario.planner.transparency)
         return self.liar.testimony(report) if self.liar is not None else report
 
     def trust_in(self, peer: int, now: float) -> float:

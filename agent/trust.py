@@ -57,7 +57,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.special import betaincinv
 
-from .config import PlannerConfig, TrustConfig
+from .config import TrustConfig
 from .messages import DIMENSIONS, PeerTrust, TrustReport
 
 SAFETY, CONSISTENCY, TRANSPARENCY = range(3)
@@ -226,18 +226,17 @@ class TrustBook:
         """Overall trust: the weakest dimension."""
         return float(np.min(self.tau(peer, now)))
 
-    def epsilon(self, peer: int, now: float, epsilon_0: float, planner: PlannerConfig) -> float:
-        """The distance to keep from ``peer``: eps_0 * g(lower bound of transparency trust)."""
-        if planner.uniform_epsilon_gain > 0.0:
-            return epsilon_0 * planner.uniform_epsilon_gain
-        if not planner.transparency:
-            return epsilon_0
+    def epsilon(self, peer: int, now: float, epsilon_0: float, transparency: bool) -> float:
+        """The distance to keep from ``peer``: eps_0 * g(lower bound of transparency trust);
+        with the transparency factor off, eps_0 * ``epsilon_gain_fixed`` from everyone."""
+        if not transparency:
+            return epsilon_0 * self.config.epsilon_gain_fixed
         alpha, beta = self.fused(peer, now)
         bound = lower_bound(alpha[TRANSPARENCY], beta[TRANSPARENCY], self.config.epsilon_quantile)
         return epsilon_0 * epsilon_gain(bound, self.config)
 
     def report(self, sender: int, seq: int, now: float, epsilon_0: Callable[[int], float],
-               planner: PlannerConfig) -> TrustReport:
+               transparency: bool) -> TrustReport:
         """Our testimony: direct evidence (without the prior) plus what we believe
         (``epsilon_0(peer)``: the distance we keep from a fully trusted ``peer``)."""
         peers = {}
@@ -250,6 +249,6 @@ class TrustBook:
                 beta=tuple(np.maximum(0.0, opinion.beta - self.config.prior_beta)),
                 tau=tuple(float(x) for x in tau),
                 trust=float(np.min(tau)),
-                epsilon=self.epsilon(peer, now, epsilon_0(peer), planner),
+                epsilon=self.epsilon(peer, now, epsilon_0(peer), transparency),
             )
         return TrustReport(sender=sender, seq=seq, stamp=now, peers=peers)

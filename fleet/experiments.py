@@ -4,6 +4,7 @@
                        [--out DIR] [--jobs J]
     trustfg experiment adversaries ...         (fleet.adversaries: every attack, three fleets)
     trustfg experiment transparency-sweep ...  (fleet.sweep: misinformation x g_max)
+    trustfg experiment bank ...                (fleet.bank: the scenario bank and its baselines)
 
 writes DIR/<name>/metrics.json and PNG figures and prints a table. metrics.json is
 
@@ -67,6 +68,20 @@ def with_attack(scenario: Scenario, attacks: dict[int, AttackConfig]) -> Scenari
 
 ALL_ON = dict(proximity=True, consistency=True, transparency=True)
 ALL_OFF = dict(proximity=False, consistency=False, transparency=False)
+NO_TRUST = dict(proximity=True, consistency=False, transparency=False)
+"""The fair "off": avoidance without trust, the proximity hinge at eps_0 from every peer
+(with BELIEVING: no plan refused or held wider for want of a check)."""
+BELIEVING = dict(reject_plans=False)
+"""Trust switches of a fleet without trust: every plan believed as it comes."""
+
+
+def believing(scenario: Scenario) -> Scenario:
+    return dataclasses.replace(scenario, trust=dataclasses.replace(scenario.trust, **BELIEVING))
+
+
+def no_trust(scenario: Scenario) -> Scenario:
+    """The planner without trust factors, believing every plan: eps_0 from every peer."""
+    return factors(believing(scenario), **NO_TRUST)
 
 
 def trust_on(scenario: Scenario) -> Scenario:
@@ -77,15 +92,15 @@ def trust_on(scenario: Scenario) -> Scenario:
 def trust_off(scenario: Scenario) -> Scenario:
     """The paper's baseline: no transparency factor (eps_0 for everyone) and every plan
     believed as it comes (trust is still gathered, for the metrics)."""
-    believing = dataclasses.replace(scenario, trust=dataclasses.replace(scenario.trust, reject_plans=False))
-    return factors(believing, **(ALL_ON | dict(transparency=False)))
+    return factors(believing(scenario), **(ALL_ON | dict(transparency=False)))
 
 
 def uniform_wide(scenario: Scenario) -> Scenario:
-    """No trust, but every peer kept at eps_0 * g_max: the uniformly careful fleet."""
+    """No trust, but every peer kept at eps_0 * g_max: the uniformly careful fleet
+    (``trust.epsilon_gain_fixed``, as the bank's "wide" method)."""
     off = trust_off(scenario)
-    return dataclasses.replace(off, planner=dataclasses.replace(
-        off.planner, uniform_epsilon_gain=scenario.trust.epsilon_gain_max))
+    return dataclasses.replace(off, trust=dataclasses.replace(
+        off.trust, epsilon_gain_fixed=scenario.trust.epsilon_gain_max))
 
 
 @dataclass(frozen=True)
@@ -99,8 +114,10 @@ class Experiment:
 EXPERIMENTS = {
     "proximity": Experiment(
         "proximity", "intersection",
-        {"on": functools.partial(factors, **ALL_ON), "off": functools.partial(factors, **ALL_OFF)},
-        "Do the trust factors prevent proximity breaches on conflicting routes?"),
+        {"on": functools.partial(factors, **ALL_ON), "fixed": no_trust,
+         "off": functools.partial(factors, **ALL_OFF)},
+        "Do the trust factors prevent proximity breaches on conflicting routes? (fixed: no trust factors, "
+        "eps_0 from every peer; off: no avoidance)"),
     "consistency": Experiment(
         "consistency", "intersection",
         {"on": functools.partial(factors, **ALL_ON),
@@ -347,8 +364,8 @@ def write_study(folder: Path, report: dict, text: str) -> None:
     print(f"wrote {folder.resolve()} in {report['wall_time_s']:.0f} s")
 
 
-STUDIES = {"adversaries": "adversaries", "transparency-sweep": "sweep"}
-"""Experiments with their own options (``trustfg experiment NAME --help``), by module."""
+STUDIES = {"adversaries": "adversaries", "transparency-sweep": "sweep", "bank": "bank"}
+"""Experiments with their own options (``trustfg experiment NAME --help``), by module; not in "all"."""
 
 
 def main(argv: list[str] | None = None) -> int:

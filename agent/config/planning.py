@@ -24,6 +24,11 @@ class PlannerConfig:
     """Nominal speed used to set the planned arrival time (a car may override it)."""
     max_speed_mps: float = 0.6
     """Speeds above this are penalised (soft limit; the vehicle's hard limit is higher)."""
+    reach_margin_m: float = 0.5
+    """A peer is left out of the graph when even closing at max_speed_mps from both sides
+    over the whole horizon, and along its own plan, it stays this much beyond its epsilon
+    from where our plan starts (agent.planner.peers_within_reach); covers a plan's small
+    excess over the soft speed limit."""
     sigma_start: float = 1e-3
     sigma_start_velocity: float = 0.05
     sigma_goal: float = 0.01
@@ -51,23 +56,21 @@ class PlannerConfig:
     diagonal_damping: bool = True
     """Damp with lambda * diag(J^T J) (scale-invariant; the hinges are far stiffer than
     the GP prior)."""
+    intervals_per_factor: int = 4
+    """'batched': consecutive intervals checked by one GTSAM factor. Each factor is a call
+    from C++ into Python per linearisation and per error evaluation; larger chunks make
+    fewer calls but denser linear systems (agent.interval_factors)."""
     interpolation: str = "batched"
-    """'batched': one factor per interval evaluating every check in one numpy call;
-    'gtsam': one WnoaInterpFactorPoint2 per interpolated check (slower, for reference)."""
+    """'batched': one factor per chunk of intervals, every check evaluated in one numpy
+    call; 'gtsam': one WnoaInterpFactorPoint2 per interpolated check (slower, for reference)."""
     lane_keeping: bool = True
     """Pull plans towards the car's route (start, via points, goal): its lane."""
     proximity: bool = True
     consistency: bool = True
     transparency: bool = True
     """The three trust factors, switchable for the experiments."""
-    uniform_epsilon_gain: float = 0.0
-    """The uniformly careful baseline: if > 0, every peer is kept at eps_0 times this,
-    whatever trust says (with ``transparency`` off and ``trust.reject_plans`` off this is a
-    fleet without trust that keeps a wide berth from everyone)."""
 
     def validate(self, path: str) -> None:
-        if self.uniform_epsilon_gain != 0.0 and self.uniform_epsilon_gain < 1.0:
-            raise ConfigError(f"{path}.uniform_epsilon_gain: must be 0 (off) or >= 1")
         if self.support_states < 3:
             raise ConfigError(f"{path}.support_states: must be at least 3")
         if self.interp_checks < 0:
@@ -75,11 +78,13 @@ class PlannerConfig:
         for name in (
             "qc", "min_horizon_s", "cruise_speed_mps", "max_speed_mps", "sigma_start",
             "sigma_start_velocity", "sigma_goal", "sigma_goal_velocity", "sigma_obstacle",
-            "sigma_proximity", "sigma_consistency", "sigma_speed", "sigma_lane", "relative_error_tol", "absolute_error_tol", "lambda_initial",
+            "sigma_proximity", "sigma_consistency", "sigma_speed", "sigma_lane", "reach_margin_m", "relative_error_tol", "absolute_error_tol", "lambda_initial",
         ):
             positive(getattr(self, name), f"{path}.{name}")
         if self.lambda_factor <= 1.0:
             raise ConfigError(f"{path}.lambda_factor: must be > 1")
+        if self.intervals_per_factor < 1:
+            raise ConfigError(f"{path}.intervals_per_factor: must be >= 1")
         if self.max_iterations < 1:
             raise ConfigError(f"{path}.max_iterations: must be >= 1")
         if self.interpolation not in ("batched", "gtsam"):
@@ -161,6 +166,10 @@ class TrustConfig:
     blame_closing_mps: float = 0.05
     """Of two cars closer than the breach distance, a car is blamed (a safety failure)
     only if it closes the gap faster than this: a car tailgated or stood still is not."""
+    epsilon_gain_fixed: float = 1.0
+    """g for every peer when the transparency factor is off (planner.transparency = false):
+    1 keeps eps_0 from everyone (the paper's baseline); a uniformly careful fleet (the
+    bank's "wide", the adversaries' "wide") keeps a wider berth from everyone."""
 
     def validate(self, path: str) -> None:
         if not 0.0 < self.forgetting <= 1.0:
@@ -171,8 +180,8 @@ class TrustConfig:
             raise ConfigError(f"{path}.tau_floor/tau_full: need 0 <= tau_floor < tau_full <= 1")
         if self.failure_weight <= 0 or self.consistency_failure_weight <= 0:
             raise ConfigError(f"{path}.failure_weight/consistency_failure_weight: must be > 0")
-        if self.epsilon_gain_max < 1.0:
-            raise ConfigError(f"{path}.epsilon_gain_max: must be >= 1")
+        if self.epsilon_gain_max < 1.0 or self.epsilon_gain_fixed < 1.0:
+            raise ConfigError(f"{path}.epsilon_gain_max/epsilon_gain_fixed: must be >= 1")
         if not 0.0 < self.epsilon_quantile < 1.0:
             raise ConfigError(f"{path}.epsilon_quantile: must be within (0, 1)")
         if self.audit_max_plans < 1:

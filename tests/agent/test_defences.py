@@ -199,14 +199,14 @@ def test_epsilon_follows_what_trust_knows_not_just_its_mean(intersection, inters
     mean_like = replace(intersection, trust=replace(intersection.trust, epsilon_quantile=0.5))
     for scenario, new_at_widest in ((intersection, True), (mean_like, False)):
         agent = CarAgent(scenario.car(2), scenario, intersection_sdf)
-        assert (agent.trust.epsilon(PEER, 0.0, eps_0, scenario.planner) == pytest.approx(widest)) == new_at_widest
+        assert (agent.trust.epsilon(PEER, 0.0, eps_0, scenario.planner.transparency) == pytest.approx(widest)) == new_at_widest
     burst = lambda t: true_plan(straight(0.4), 0.4, t).shifted([0.0, 0.6] if t < 1.0 else [0.0, 0.0])  # noqa: E731
     gaps = []
     for scenario in (intersection, mean_like):
         liar = watch(scenario, intersection_sdf, 0, plans=burst, seconds=4.0)
         honest = watch(scenario, intersection_sdf, 0, seconds=4.0)
-        gaps.append(liar.trust.epsilon(PEER, 4.0, eps_0, scenario.planner)
-                    - honest.trust.epsilon(PEER, 4.0, eps_0, scenario.planner))
+        gaps.append(liar.trust.epsilon(PEER, 4.0, eps_0, scenario.planner.transparency)
+                    - honest.trust.epsilon(PEER, 4.0, eps_0, scenario.planner.transparency))
     assert gaps[0] > 0.1 and gaps[0] > gaps[1] + 0.05
 
 

@@ -107,3 +107,15 @@ def test_a_car_with_a_skewed_clock_stays_trusted_under_loss_and_delay(lab):
 
     for seed in (310, 311):
         assert trust_in_car_2(seed) >= 0.8, seed
+
+
+def test_the_fair_off_keeps_eps_0_from_every_peer_where_trust_starts_wider(intersection):
+    from trustfg.fleet.experiments import EXPERIMENTS
+
+    short = dataclasses.replace(intersection, sim=dataclasses.replace(intersection.sim, timeout_s=3.0))
+    eps_0 = intersection.safety.epsilon_0(0.1, 0.1)
+    off_diagonal = ~np.eye(len(intersection.cars), dtype=bool)
+    fixed = simulate(EXPERIMENTS["proximity"].variants["fixed"](short), 3).epsilon[:, off_diagonal]
+    on = simulate(EXPERIMENTS["proximity"].variants["on"](short), 3).epsilon[:, off_diagonal]
+    assert np.allclose(fixed, eps_0)
+    assert on[0].min() > 1.2 * eps_0  # trust starts at the prior (2/3): a wider berth until it grows
