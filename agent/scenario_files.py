@@ -173,6 +173,12 @@ def _fields(obj: Any, defaults: Any = None) -> dict[str, Any]:
                  or getattr(obj, f.name) != getattr(defaults, f.name))}
 
 
+def _has_defaults(obj: Any) -> bool:
+    """Whether every field of dataclass ``obj`` has a default (AttackConfig's name has none)."""
+    return all(f.default is not dataclasses.MISSING or f.default_factory is not dataclasses.MISSING
+               for f in dataclasses.fields(obj))
+
+
 def _toml_value(value: Any) -> str:
     if isinstance(value, bool):
         return "true" if value else "false"
@@ -186,7 +192,7 @@ def _toml_value(value: Any) -> str:
         return "[" + ", ".join(_toml_value(v) for v in value) + "]"
     if isinstance(value, dict):
         return "{ " + ", ".join(f"{json.dumps(str(k))} = {_toml_value(v)}" for k, v in value.items()) + " }"
-    if dataclasses.is_dataclass(value):
-        fields = _fields(value, type(value)())  # inline tables: what differs from the defaults
+    if dataclasses.is_dataclass(value):  # inline tables: what differs from the defaults, if it has them
+        fields = _fields(value, type(value)() if _has_defaults(value) else None)
         return "{ " + ", ".join(f"{k} = {_toml_value(v)}" for k, v in fields.items()) + " }"
     raise TypeError(f"cannot write {type(value).__name__} to TOML")

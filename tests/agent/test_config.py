@@ -110,8 +110,14 @@ def test_config_is_immutable(intersection):
         intersection.planner.qc = 3.0  # type: ignore[misc]
 
 
-def test_dump_and_load_round_trip(tmp_path, lab):
+@pytest.mark.parametrize("changed_only", [False, True])
+def test_dump_and_load_round_trip(tmp_path, lab, changed_only):
+    """Also with a liar: an attack (a table with a required name) is written whole."""
+    from trustfg.agent.config import AttackConfig
     from trustfg.agent.scenario_files import dump_scenario
-    path = tmp_path / "again.toml"
-    path.write_text(dump_scenario(lab))
-    assert load_scenario(path) == lab
+    liar = dataclasses.replace(lab, cars=tuple(
+        dataclasses.replace(c, attack=AttackConfig("bias", {"bias_m": 0.1})) if c.id == 1 else c for c in lab.cars))
+    for scenario in (lab, liar):
+        path = tmp_path / "again.toml"
+        path.write_text(dump_scenario(scenario, changed_only=changed_only))
+        assert load_scenario(path) == scenario
