@@ -5,7 +5,7 @@ import json
 import pytest
 
 from trustfg.agent.config import AttackConfig
-from trustfg.fleet.launch import loopback_fleet, run
+from trustfg.fleet.launch import START_LEAD_S, loopback_fleet, run
 
 
 @pytest.fixture(scope="module")
@@ -54,9 +54,18 @@ def test_a_skewed_clock_is_seen_and_forgiven(honest):
 
 
 def test_honest_cars_distrust_a_liar_over_the_network(liar):
+    """Every honest car trusts the liar 0.2 less than every honest peer within 3 s of its
+    departure (from the trust reports heard), and still less at the end. The end is not
+    held to the 0.2 gap: a liar parked at its goal tells no checkable lie, and forgetting
+    (0.85/s) wins back trust while the last car drives on (measured, seed 12: 0.50 when it
+    arrived at 15.4 s, 0.74 at 22.3 s)."""
     out, summary = liar
     assert summary["crashed"] == [] and summary["breaches"] == []
     assert all(summary["reached_goal"])
+    start = next(json.loads(line)["message"] for line in open(out / "messages.jsonl")
+                 if '"kind": "start"' in line and '"message"' in line)
+    departs = start["cars"]["1"]["depart"] - (start["stamp"] + START_LEAD_S)  # after the go, as the summary
+    assert summary["trust_detected_at_s"] is not None and summary["trust_detected_at_s"] <= departs + 3.0, summary
     ids = summary["car_ids"]
     trust = summary["trust"]
     liar_index = ids.index(1)
@@ -64,4 +73,4 @@ def test_honest_cars_distrust_a_liar_over_the_network(liar):
     for a in honest:
         peers = [trust[a][b] for b in honest if b != a]
         assert min(peers) > 0.8, trust[a]
-        assert trust[a][liar_index] <= min(peers) - 0.2, trust[a]
+        assert trust[a][liar_index] < min(peers) - 0.1, trust[a]
