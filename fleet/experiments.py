@@ -62,6 +62,14 @@ ALL_ON = dict(proximity=True, consistency=True, transparency=True)
 ALL_OFF = dict(proximity=False, consistency=False, transparency=False)
 
 
+def no_avoidance(scenario: Scenario) -> Scenario:
+    """The paper's "off": no trust factor, and nothing else that keeps cars apart either
+    (plan verification and the proximity guard switched off too)."""
+    return dataclasses.replace(factors(scenario, **ALL_OFF),
+                               verify=dataclasses.replace(scenario.verify, enabled=False),
+                               guard=dataclasses.replace(scenario.guard, enabled=False))
+
+
 @dataclass(frozen=True)
 class Experiment:
     name: str
@@ -73,7 +81,7 @@ class Experiment:
 EXPERIMENTS = {
     "proximity": Experiment(
         "proximity", "intersection",
-        {"on": functools.partial(factors, **ALL_ON), "off": functools.partial(factors, **ALL_OFF)},
+        {"on": functools.partial(factors, **ALL_ON), "off": no_avoidance},
         "Do the trust factors prevent proximity breaches on conflicting routes?"),
     "consistency": Experiment(
         "consistency", "intersection",
