@@ -66,7 +66,7 @@ REPLAN_MARGIN_S = 0.15
 before the window began. An older announcement has been superseded by plans we never
 received (loss, delay); holding a car to it would read silence as erratic driving."""
 WARM_GOAL_M = 0.25
-"""A previous plan that ends further than this from the goal does not warm-start a replan."""
+"""A plan that ends further than this from the goal does not warm-start a replan."""
 DEADLOCK_SEEN_S = 0.5
 """Cars seen within this long are what the deadlock watch goes by."""
 START_FROM_PLAN_M = 0.05
@@ -275,9 +275,11 @@ class CarAgent:
         if detour is not None:  # giving way in a deadlock (agent.deadlock): to the detour instead
             request = dataclasses.replace(request, goal=detour, route=(), lane=(), t_arrive=t0 + ARRIVAL_SLACK_S
                                           + float(np.linalg.norm(detour - motion.position)) / self.cruise)
-        if self.plan is not None and np.linalg.norm(self.plan.positions[-1] - request.goal) > WARM_GOAL_M:
-            # The previous plan went elsewhere (a fallback stops short, a detour): no warm start.
-            request = dataclasses.replace(request, warm_start=None)
+        # Warm-start from the previous plan, or, when that one went elsewhere (a fallback
+        # stops short, a detour), from the last verified plan if that one goes to the goal.
+        warm = next((plan for plan in (self.plan, self.verified) if plan is not None
+                     and np.linalg.norm(plan.positions[-1] - request.goal) <= WARM_GOAL_M), None)
+        request = dataclasses.replace(request, warm_start=warm)
         try:
             outcome = plan_safely(request, self._bounds([peer for peer, _ in constraints]), self.scenario.planner,
                                   self.scenario.verify, self.sdf, self.verified, self.clock)

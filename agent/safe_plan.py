@@ -55,6 +55,8 @@ SLOWER_HORIZON = 1.5
 """The ``slower`` alternative's horizon, as a multiple of the failed one."""
 BUMP_WIDTH_S = 1.0
 """Standard deviation in time of the ``other side`` displacement."""
+SIDE_CLEAR_M = 0.02
+"""A plan this close to a peer's track goes round it on the left."""
 OBSTACLE_PUSH_M = 0.05
 """``other side`` of a wall pushes this much further out than the plan lacks."""
 TIGHTEN_PAD = 1.25
@@ -160,24 +162,34 @@ def tightened(request: PlanRequest, failed: Plan, conflicts: list[Conflict]) -> 
 
 
 def other_side(plan: Plan, conflict: Conflict, request: PlanRequest, sdf: SignedDistanceField) -> Plan:
-    """``plan`` displaced around the time of ``conflict`` so that it passes on the other
-    side: of a peer, the conflict point mirrored through the peer's position and pushed
-    out to its epsilon; of a wall, pushed out along the distance field's gradient (to the
-    left of the motion where the gradient vanishes, as in the middle of a pillar a
-    straight route crosses) by what it lacks. Faded in and out with a Gaussian bump in
-    time; the start stays where the car is."""
+    """``plan`` displaced sideways around the time of ``conflict`` so that it passes on the
+    other side: of a peer, mirrored across the peer's track to the peer's epsilon (sideways
+    to the motion relative to it); of a wall, pushed out by what it lacks, to the side the
+    distance field rises (to the left where that is not clear, as in the middle of a
+    pillar a straight route crosses). Faded in and out with a Gaussian bump in time; the
+    start stays where the car is."""
     p = np.array(conflict.position)
     (v,) = plan.state_at(conflict.t)[1]
-    left = np.array([-v[1], v[0]]) if np.linalg.norm(v) > 1e-6 else np.array([1.0, 0.0])
-    left = left / np.linalg.norm(left)
     if conflict.kind == "peer":
         q = np.array(conflict.other)
-        away = q - p if np.linalg.norm(q - p) > 1e-6 else left
-        shift = q + away / np.linalg.norm(away) * request.peers[conflict.peer].epsilon - p
+        peer = request.peers[conflict.peer]
+        (w,) = peer.plan.state_at(conflict.t)[1]
+        relative = v - w
+    else:
+        relative = v
+    left = np.array([-relative[1], relative[0]])
+    left = left / np.linalg.norm(left) if np.linalg.norm(left) > 1e-6 else np.array([0.0, 1.0])
+    if conflict.kind == "peer":
+        offset = float(left @ (p - q))  # which side of the peer we pass, and how far
+        side = 1.0 if offset >= 0.0 else -1.0
+        if abs(offset) < SIDE_CLEAR_M:
+            side = -1.0  # straight through it: the mirror of a pass to its right is to its left
+        shift = left * (-side * peer.epsilon - offset)
     else:
         _, gradient = sdf.distance_and_gradient(p)
-        out = gradient if np.linalg.norm(gradient) > 0.3 else left
-        shift = out / np.linalg.norm(out) * (conflict.excess + OBSTACLE_PUSH_M)
+        lateral = float(left @ gradient)
+        side = np.sign(lateral) if abs(lateral) > 0.3 else 1.0
+        shift = left * side * (conflict.excess + OBSTACLE_PUSH_M)
     t = plan.times()
     weight = np.exp(-0.5 * ((t - conflict.t) / BUMP_WIDTH_S) ** 2)
     weight[0] = 0.0

@@ -131,6 +131,7 @@ def verify(plan: Plan, peers: Sequence[PeerConstraint], bounds: Bounds, sdf: Sig
     if len(bounds.breach) != len(peers):
         raise ValueError(f"{len(peers)} peers but {len(bounds.breach)} breach distances")
     times = check_times(plan, peers, config.sample_m, t_from)
+    samples = len(times)
     p, v = plan.state_at(times)
     if not (np.all(np.isfinite(p)) and np.all(np.isfinite(v))):
         return Verdict(False, (Conflict("obstacle", float(times[0]), math.inf),), samples=len(times))
@@ -166,7 +167,7 @@ def verify(plan: Plan, peers: Sequence[PeerConstraint], bounds: Bounds, sdf: Sig
         conflicts.append(Conflict("limits", float(times[k]), lag - config.limit_lag_m, position=_xy(p[k])))
 
     conflicts.sort(key=lambda c: c.t)
-    return Verdict(not conflicts, tuple(conflicts), clearance, obstacle_clearance, len(times))
+    return Verdict(not conflicts, tuple(conflicts), clearance, obstacle_clearance, samples)
 
 
 def follower_lag(times: np.ndarray, speed: np.ndarray, max_speed: float, max_accel: float) -> tuple[float, int]:

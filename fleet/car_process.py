@@ -356,7 +356,7 @@ class CarProcess:
         bus.publish("status", messages.encode(messages.StatusMessage(
             self.car.id, self._seq["status"], self.clock(), self.state,
             last.time_ms if last else 0.0, last.iterations if last else 0, self.agent.at_goal,
-            dict(sorted(counters.items(), key=lambda kv: not kv[0].startswith("plan_age"))[:64]))))
+            dict(sorted(counters.items(), key=lambda kv: not kv[0].startswith(("plan", "deadlock")))[:64]))))
 
     def _write_stats(self, path: Path, natnet_client: NatNetClient, bus: FleetBus,
                      sender: CommandSender) -> None:

@@ -77,3 +77,4 @@ def test_car_process_stops_without_pose_drives_after_start_and_stops_on_sigterm(
     summary = json.loads(stats.read_text())
     assert summary["control"]["stale_pose_stops"] > 0
     assert summary["control"]["sent"] > 50
+    assert summary["agent"].get("plans_first", 0) > 0  # its replans were verified (agent.safe_plan)
