@@ -44,7 +44,7 @@ import numpy as np
 
 from . import misbehaviour
 from .config import CarConfig, Scenario
-from .deadlock import DeadlockWatch, PeerSeen
+from .deadlock import DeadlockWatch, peers_seen
 from .gp import Plan, standing
 from .messages import PlanMessage, TrustReport
 from .planner import PeerConstraint, PlanningError, PlanRequest, PlanResult
@@ -67,8 +67,6 @@ before the window began. An older announcement has been superseded by plans we n
 received (loss, delay); holding a car to it would read silence as erratic driving."""
 WARM_GOAL_M = 0.25
 """A plan that ends further than this from the goal does not warm-start a replan."""
-DEADLOCK_SEEN_S = 0.5
-"""Cars seen within this long are what the deadlock watch goes by."""
 START_FROM_PLAN_M = 0.05
 START_FROM_PLAN_MPS = 0.15
 """A replan starts from the previous plan while the car is this close to it."""
@@ -293,26 +291,11 @@ class CarAgent:
     def _give_way(self, now: float, position: np.ndarray) -> np.ndarray | None:
         """The deadlock watch (agent.deadlock) on what we see: a detour goal while we give
         way, else None. Counts ``deadlocks`` and ``deadlock_yields``."""
-        seen = {}
-        for car_id, track in self.tracks.items():
-            motion = track.motion()
-            if car_id == self.car.id or motion is None or now - motion.stamp > DEADLOCK_SEEN_S:
-                continue
-            view = self.peers.get(car_id)
-            at_goal = bool(view and view.goal is not None
-                           and np.linalg.norm(motion.position - view.goal) <= self.scenario.arrival_radius_m)
-            waiting = bool(view and view.latest is not None and view.latest.plan.t0 > view.latest.stamp + 0.05)
-            way = None
-            if view is not None and view.accepted is not None:
-                way = view.accepted.position_at(np.linspace(now, max(now, view.accepted.t_end), 20))
-                way = way if view.goal is None else np.vstack([way, view.goal])
-            goal = None if view is None or view.goal is None else np.asarray(view.goal, float)
-            seen[car_id] = PeerSeen(motion.position, at_goal, waiting, goal, way)
+        seen = peers_seen(self.tracks, self.peers, self.car.id, now, self.scenario.arrival_radius_m)
         safety, r = self.scenario.safety, self.car.radius_m
         blockers = frozenset(self.last_outcome.blocked_by) if self.last_outcome else frozenset()
         detour = self.deadlock.goal(now, position, np.asarray(self.car.goal, float), seen, now >= self.depart_at,
-                                    safety.epsilon_0(r, r),
-                                    self.sdf, safety.epsilon_obstacle(r), blockers)
+                                    safety.epsilon_0(r, r), self.sdf, safety.epsilon_obstacle(r), blockers)
         for name, count in (("deadlocks", self.deadlock.deadlocks), ("deadlock_yields", self.deadlock.yields)):
             if count:
                 self.counters[name] = count

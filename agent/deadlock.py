@@ -44,6 +44,11 @@ from .world import SignedDistanceField
 DETOUR_TURNS_DEG = (0.0, 45.0, -45.0, 90.0, -90.0, 135.0, -135.0)
 """Directions a detour tries, turned from straight away from the cars that go first."""
 SEGMENT_SAMPLES = 12
+SEEN_S = 0.5
+"""Cars seen within this long are what the watch goes by."""
+WAITING_S = 0.05
+"""A peer whose latest plan starts this much after it was sent has not departed yet."""
+WAY_SAMPLES = 20
 
 
 @dataclass(frozen=True)
@@ -141,6 +146,26 @@ class DeadlockWatch:
             progress = float(np.linalg.norm(first - goal) - np.linalg.norm(latest - goal))
             return progress < self.config.progress_m
         return max(float(np.linalg.norm(p - latest)) for p, _ in track) < self.config.progress_m
+
+
+def peers_seen(tracks: dict, views: dict, own_id: int, now: float, arrival_radius_m: float) -> dict[int, PeerSeen]:
+    """What the watch needs of every car we saw lately (``tracks``: agent.track.Track by
+    id), with what we heard from it (``views``: car_agent.PeerView by id)."""
+    seen = {}
+    for car_id, track in tracks.items():
+        motion = track.motion()
+        if car_id == own_id or motion is None or now - motion.stamp > SEEN_S:
+            continue
+        view = views.get(car_id)
+        goal = None if view is None or view.goal is None else np.asarray(view.goal, float)
+        at_goal = goal is not None and float(np.linalg.norm(motion.position - goal)) <= arrival_radius_m
+        waiting = bool(view and view.latest is not None and view.latest.plan.t0 > view.latest.stamp + WAITING_S)
+        way = None
+        if view is not None and view.accepted is not None:
+            way = view.accepted.position_at(np.linspace(now, max(now, view.accepted.t_end), WAY_SAMPLES))
+            way = way if goal is None else np.vstack([way, goal])
+        seen[car_id] = PeerSeen(motion.position, at_goal, waiting, goal, way)
+    return seen
 
 
 def _way(peer: PeerSeen) -> np.ndarray:

@@ -98,10 +98,11 @@ def plan_safely(request: PlanRequest, bounds: Bounds, planner: PlannerConfig, co
     name = "warm" if request.warm_start is not None else "cold"
     attempt: PlanRequest | None = request
     budget_start = clock() if clock else 0.0
+    retry_planner = dataclasses.replace(planner, max_iterations=min(planner.max_iterations, config.retry_iterations))
     while attempt is not None:
         tried.append(name)
         try:
-            result = plan_trajectory(attempt, planner, sdf)
+            result = plan_trajectory(attempt, planner if len(tried) == 1 else retry_planner, sdf)
         except PlanningError:
             result = None
         if result is not None:

@@ -167,6 +167,9 @@ class VerifyConfig:
     max_attempts: int = 4
     """Plans tried per replan: the warm-started one, then alternatives (agent.safe_plan:
     tightened, the other side of a conflict, slower, cold); then the fallback."""
+    retry_iterations: int = 10
+    """Levenberg-Marquardt iterations an alternative may take (the first plan takes the
+    planner's own ``max_iterations``): retries must fit in a replan's budget."""
     budget_ms: float = 80.0
     """Wall time after which no further alternative is started in a replan (the car
     process; the in-process fleet runs on simulated time and counts attempts only)."""
@@ -179,8 +182,8 @@ class VerifyConfig:
             raise ConfigError(f"{path}.tolerance: must be within [0, 1): the breach distance is never eaten")
         if self.limit_lag_m < 0:
             raise ConfigError(f"{path}.limit_lag_m: must be >= 0")
-        if self.max_attempts < 1:
-            raise ConfigError(f"{path}.max_attempts: must be >= 1")
+        if self.max_attempts < 1 or self.retry_iterations < 1:
+            raise ConfigError(f"{path}.max_attempts/retry_iterations: must be >= 1")
         for name in ("sample_m", "limits_horizon_s", "budget_ms", "fallback_decel_mps2"):
             positive(getattr(self, name), f"{path}.{name}")
 
