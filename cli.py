@@ -17,11 +17,14 @@ COMMANDS = {
     "mocap-sim": ("trustfg.mocap_sim.sim", "simulated cars and OptiTrack (NatNet) for a fleet config"),
     "faults": ("trustfg.fleet.faults", "the fault matrix: a fleet in network namespaces under each fault (root)"),
     "go": ("trustfg.fleet.go", "the operator's start signal for a fleet in the lab"),
+    "router": ("trustfg.fleet.router", "a Zenoh router (no zenohd needed) for cars that talk through one"),
     "dashboard": ("trustfg.dashboard.server", "the live web page of a fleet, or a recorded run replayed"),
     "record": ("trustfg.fleet.recording", "record a live fleet to an MCAP file"),
+    "foxglove": ("trustfg.dashboard.foxglove_live", "serve the live fleet to Foxglove (WebSocket protocol)"),
     "report": ("trustfg.dashboard.report", "figures and an HTML report from a recorded run"),
     "secure-config": ("trustfg.fleet.security", "Zenoh mutual-TLS and access-control config for one fleet member"),
-    "experiment": ("trustfg.fleet.experiments", "run the paper's experiments in the in-process simulation"),
+    "experiment": ("trustfg.fleet.experiments", "run the paper's experiments (and the scenario bank) in-process"),
+    "scenario": ("trustfg.fleet.scenes", "generate a scene from a seed, or check a scene's starts and goals"),
 }
 
 

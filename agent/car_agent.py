@@ -309,13 +309,14 @@ class CarAgent:
 
     def _use(self, outcome: Outcome) -> None:
         """Adopt a replan's outcome and count it (``plans_first``, ``plans_retry``,
-        ``plans_fallback``, ``plans_unverified``)."""
+        ``plans_fallback``, ``plans_unverified``; ``peers_out_of_reach`` of the plan adopted)."""
         self.counters[f"plans_{outcome.outcome}"] += 1
         if outcome.outcome != FALLBACK:
             self.verified = outcome.plan
         self.plan = outcome.plan
         self.last_outcome = outcome
         self.last_result = outcome.result
+        self.counters["peers_out_of_reach"] += outcome.result.peers_out_of_reach
         self.replan_ms.append(outcome.result.time_ms)
 
     def _start_state(self, motion, t0: float, now: float) -> tuple[np.ndarray, np.ndarray]:

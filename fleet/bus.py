@@ -48,6 +48,7 @@ def zenoh_config(bus: BusConfig, extra_listen: tuple[str, ...] = ()) -> zenoh.Co
         if connect:
             config.insert_json5("connect/endpoints", json.dumps(connect))
         config.insert_json5("scouting/multicast/enabled", json.dumps(bus.multicast_scouting))
+        config.insert_json5("transport/unicast/max_links", json.dumps(bus.max_links))
         if bus.multicast_interface:
             config.insert_json5("scouting/multicast/interface", json.dumps(bus.multicast_interface))
     except Exception as exc:  # zenoh raises ZError and others for bad files or values
@@ -86,6 +87,7 @@ class FleetBus:
         """Liveliness of every car process seen: True while its token is up."""
         self._session: zenoh.Session | None = None
         self._publishers: dict[str, object] = {}
+        self._reliable_plan = None
         self._entities: list = []
 
     # --- lifecycle -------------------------------------------------------------------------
@@ -108,7 +110,17 @@ class FleetBus:
         fleet = self.fleet
         if self.car_id is not None:
             cid = self.car_id
-            self._publishers["plan"] = zext.declare_advanced_publisher(
+            # Plans go two ways. Best effort (on a UDP link, ``?rel=0``, where the peers have
+            # one), repeated every control.plan_period_s: a lost plan is replaced by the next
+            # instead of retransmitted, which over TCP at heavy loss held every later plan back
+            # for seconds. And reliable, each new plan once, through an advanced publisher with
+            # a cache of 1: late joiners and peers back from a partition get the latest at once
+            # (the best-effort path alone took seconds to resume). Whichever copy arrives first
+            # is taken; the other is dropped by the Inbox as a repeat of its sequence number.
+            self._publishers["plan"] = session.declare_publisher(
+                key(fleet, cid, "plan"), reliability=zenoh.Reliability.BEST_EFFORT, express=True,
+                congestion_control=zenoh.CongestionControl.DROP)
+            self._reliable_plan = zext.declare_advanced_publisher(
                 session, key(fleet, cid, "plan"), cache=zext.CacheConfig(max_samples=1),
                 publisher_detection=True, sample_miss_detection=zext.MissDetectionConfig(heartbeat=0.5),
                 reliability=zenoh.Reliability.RELIABLE, congestion_control=zenoh.CongestionControl.DROP)
@@ -148,9 +160,11 @@ class FleetBus:
         session, self._session = self._session, None
         if session is None:
             return
-        entities = [*self._entities, *self._publishers.values()]
+        entities = [*self._entities, *self._publishers.values(),
+                    *([self._reliable_plan] if self._reliable_plan is not None else [])]
         self._entities.clear()
         self._publishers.clear()
+        self._reliable_plan = None
 
         def close_all() -> None:
             for entity in entities:
@@ -170,15 +184,25 @@ class FleetBus:
             self.counters["close_timed_out"] += 1
             log.warning("the Zenoh session did not close within %.1f s; leaving it to the OS", timeout_s)
 
+    def links(self) -> list[tuple[str, str, bool]]:
+        """(local, remote, reliable) of every Zenoh link this session has now."""
+        if self._session is None:
+            return []
+        return [(str(link.src), str(link.dst), link.reliability == zenoh.Reliability.RELIABLE)
+                for link in self._session.info.links()]
+
     # --- sending ---------------------------------------------------------------------------
 
-    def publish(self, kind: str, payload: bytes) -> None:
-        """Publish one of our own messages (kind in KINDS, or "start" for an observer)."""
+    def publish(self, kind: str, payload: bytes, *, repeat: bool = False) -> None:
+        """Publish one of our own messages (kind in KINDS, or "start" for an observer). A new
+        plan goes best effort and reliably; a ``repeat`` of the latest, best effort only."""
         publisher = self._publishers.get(kind)
         if publisher is None:
             raise BusError(f"this bus cannot publish {kind!r} (car_id={self.car_id})")
         try:
             publisher.put(payload)
+            if kind == "plan" and not repeat and self._reliable_plan is not None:
+                self._reliable_plan.put(payload)
             self.counters[f"sent_{kind}"] += 1
         except Exception as exc:  # a closed session or a full queue must not kill the loop
             self.counters[f"send_failed_{kind}"] += 1

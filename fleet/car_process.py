@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import itertools
 import json
 import logging
 import math
@@ -47,16 +48,17 @@ import numpy as np
 
 from ..agent import messages
 from ..agent.car_agent import CarAgent
-from ..agent.config import CarConfig, ConfigError, Scenario, parse_udp_address
+from ..agent.config import CarConfig, ConfigError, Scenario
 from ..agent.gp import standing
 from ..agent.scenario_files import load_scenario
 from ..agent.world import build_sdf
 from ..bridge import natnet
-from ..bridge.carlink import CommandSender, Flags
+from ..bridge.carlink import CommandSender, Flags, link_key
 from ..bridge.drive import drive
 from ..bridge.natnet_client import NatNetClient, NatNetClientOptions
 from .bus import FleetBus, Received
 from .command import configured, stop_on_signals
+from .laps import Laps
 from .ticker import ticks
 
 log = logging.getLogger(__name__)
@@ -93,8 +95,18 @@ class ControlStats:
     """Ticks whose forward speed the proximity guard lowered (bridge.guard)."""
     late_ms: deque = field(default_factory=lambda: deque(maxlen=100_000))
     """Lateness of the latest ticks (bounded: a lab run may last hours)."""
+    late_p99_by_minute: deque = field(default_factory=lambda: deque(maxlen=24 * 60))
+    """p99 lateness of every minute of ticks, ms (does the timing hold over hours?)."""
+    ticks: int = 0
     started: float = 0.0
     stopped: float = 0.0
+
+    def add(self, late_ms: float, per_minute: int) -> None:
+        self.late_ms.append(late_ms)
+        self.ticks += 1
+        if self.ticks % per_minute == 0:
+            minute = list(itertools.islice(reversed(self.late_ms), per_minute))
+            self.late_p99_by_minute.append(round(float(np.percentile(minute, 99)), 3))
 
     def summary(self) -> dict:
         elapsed = max(self.stopped - self.started, 1e-9)
@@ -105,6 +117,7 @@ class ControlStats:
             "jitter_ms_p50": round(float(np.percentile(late, 50)), 3),
             "jitter_ms_p99": round(float(np.percentile(late, 99)), 3),
             "jitter_ms_max": round(float(np.max(late)), 3),
+            "late_ms_p99_by_minute": list(self.late_p99_by_minute),
         }
 
 
@@ -118,6 +131,7 @@ class CarProcess:
         self.car = car
         self.clock = clock
         self.natnet = natnet_options(scenario)
+        link_key(car)  # a missing or bad key is a config error now, not when driving
         self.stop = threading.Event()
         self.agent = CarAgent(car=car, scenario=scenario, sdf=build_sdf(scenario.world),
                               depart_at=math.inf, clock=time.perf_counter)
@@ -133,6 +147,7 @@ class CarProcess:
         self._alive: dict[int, bool] = {}
         self.stuck = False
         self._motion: deque = deque()  # (t, x, y, commanded v) of the control loop
+        self.laps = Laps(car, scenario.control.laps, scenario.control.lap_turn_s)
 
     # --- inputs ---------------------------------------------------------------------------
 
@@ -202,7 +217,7 @@ class CarProcess:
     def _control_loop(self, natnet_client: NatNetClient, sender: CommandSender) -> None:
         self.control.started = time.monotonic()
         for deadline, now_mono in ticks(1.0 / self.scenario.control.command_rate_hz, self.stop):
-            self.control.late_ms.append(max(0.0, now_mono - deadline) * 1e3)
+            self.control.add(max(0.0, now_mono - deadline) * 1e3, int(60 * self.scenario.control.command_rate_hz))
             try:
                 self._command(natnet_client, sender)
             except Exception:  # a bad tick must not take the car's brakes with it
@@ -214,10 +229,13 @@ class CarProcess:
         pose = self._own_pose(natnet_client)
         plan = self._plan
         now = self.clock()
+        turn = pose and self.laps.turn_command(now, pose[2], self.scenario.tracking, self.scenario.vehicle)
         if pose is None:
             self.control.stale_pose_stops += 1
             self.control.stops += 1
             sender.send(0.0, 0.0, Flags.STOP)
+        elif turn:  # between laps: turning in place towards the next leg
+            sender.send(*turn)
         elif plan is None or not self.started or now < self.agent.depart_at or self.agent.at_goal:
             self.control.stops += 1
             sender.send(0.0, 0.0, Flags.STOP)
@@ -251,10 +269,10 @@ class CarProcess:
 
     def run(self, stats_path: Path | None = None) -> int:
         scenario, car = self.scenario, self.car
-        host, port = parse_udp_address(car.link, f"cars[id={car.id}].link")
         sys.setswitchinterval(SWITCH_INTERVAL_S)
-        log.info("car %d: NatNet %s at %s, link %s", car.id, scenario.natnet.mode, scenario.natnet.server, car.link)
-        with CommandSender(car.id, (host, port), stamp_clock=self.clock) as sender, \
+        log.info("car %d: NatNet %s at %s, link %s (version %d)", car.id, scenario.natnet.mode, scenario.natnet.server,
+                 car.link, car.link_version)
+        with CommandSender.for_car(car, stamp_clock=self.clock) as sender, \
                 NatNetClient(self.natnet, on_frame=self._on_frame) as natnet_client, \
                 FleetBus(scenario.bus, scenario.fleet, car.id, listen=car.listen, clock=self.clock) as bus:
             controller = threading.Thread(target=self._control_loop, args=(natnet_client, sender),
@@ -276,7 +294,7 @@ class CarProcess:
         control = self.scenario.control
         started_wait = self.clock()
         now = self.clock()
-        next_replan = now
+        next_replan = next_plan = now
         next_trust = now + control.trust_report_period_s * (self.car.id % 7) / 7
         next_pose = now
         next_status = now
@@ -299,13 +317,11 @@ class CarProcess:
                 if now - next_replan > control.replan_period_s:
                     next_replan = now + control.replan_period_s  # do not try to catch up
                 self._replan(now)
-                outgoing = self.agent.plan_message(now)
-                own = self.agent.tracks.get(self.car.id)
-                motion = own.motion() if own else None
-                if outgoing is not None and self.stuck and motion is not None:  # the truth: standing still
-                    outgoing = dataclasses.replace(outgoing, plan=standing(motion.position, now))
-                if outgoing is not None:
-                    bus.publish("plan", messages.encode(outgoing))
+                next_plan = now + control.plan_period_s
+                self._publish_plan(bus, now, repeat=False)  # a new plan goes out at once, both ways
+            if now >= next_plan:  # and again every plan_period_s, best effort: a lost plan is soon replaced
+                next_plan = max(next_plan + control.plan_period_s, now)
+                self._publish_plan(bus, now, repeat=True)
             if now >= next_trust:
                 next_trust = max(next_trust + control.trust_report_period_s, now)
                 bus.publish("trust", messages.encode(self.agent.trust_message(now)))
@@ -329,11 +345,29 @@ class CarProcess:
             except Exception:  # keep the last plan; the car keeps tracking it
                 log.exception("car %d: replanning raised", self.car.id)
                 self.counters["replan_errors"] += 1
-        if self.agent.at_goal:
+        own = self.agent.tracks.get(self.car.id)
+        motion = own.motion() if own else None
+        if motion is not None and self.laps.advance(self.agent, tuple(motion.position), now):
+            log.info("car %d: lap %d of %d", self.car.id, self.laps.lap, self.laps.laps)
+        if self.arrived:
             self.state = "arrived"
         elif self.started:
             self.state = "stuck" if self.stuck else "driving"
         self._plan = self.agent.plan
+
+    @property
+    def arrived(self) -> bool:
+        """At the goal of the last lap."""
+        return self.agent.at_goal and self.laps.done
+
+    def _publish_plan(self, bus: FleetBus, now: float, repeat: bool) -> None:
+        outgoing = self.agent.plan_message(now)
+        own = self.agent.tracks.get(self.car.id)
+        motion = own.motion() if own else None
+        if outgoing is not None and self.stuck and motion is not None:  # the truth: standing still
+            outgoing = dataclasses.replace(outgoing, plan=standing(motion.position, now))
+        if outgoing is not None:
+            bus.publish("plan", messages.encode(outgoing), repeat=repeat)
 
     def _publish_pose(self, bus: FleetBus, natnet_client: NatNetClient, now: float) -> None:
         pose = self._own_pose(natnet_client)
@@ -350,12 +384,13 @@ class CarProcess:
         counters["commands_sent"] = self.control.sent
         counters["stale_pose_stops"] = self.control.stale_pose_stops
         counters["guard_limited"] = self.control.guard_limited
+        counters["lap"] = self.laps.lap
         now = self.clock()
         for peer, view in self.agent.peers.items():  # how fresh each peer's plan is, for resync checks
             counters[f"plan_age_ms_{peer}"] = int(min(1e9, max(0.0, now - view.accepted_received) * 1e3))
         bus.publish("status", messages.encode(messages.StatusMessage(
             self.car.id, self._seq["status"], self.clock(), self.state,
-            last.time_ms if last else 0.0, last.iterations if last else 0, self.agent.at_goal,
+            last.time_ms if last else 0.0, last.iterations if last else 0, self.arrived,
             dict(sorted(counters.items(), key=lambda kv: not kv[0].startswith(("plan", "deadlock")))[:64]))))
 
     def _write_stats(self, path: Path, natnet_client: NatNetClient, bus: FleetBus,
@@ -364,7 +399,7 @@ class CarProcess:
         stats = {
             "car_id": self.car.id,
             "state": self.state,
-            "at_goal": self.agent.at_goal,
+            "at_goal": self.arrived,
             "replan_ms": [round(x, 3) for x in self.agent.replan_ms],
             "control": self.control.summary(),
             "agent": dict(self.agent.counters),

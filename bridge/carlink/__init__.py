@@ -10,28 +10,40 @@ Three pieces, each documented where it lives:
   firmware runs these rules; mocap_sim's simulated car runs this very class.
 * :mod:`.link` -- the sockets (thin I/O): :class:`CommandSender` for the car process and
   :class:`CommandReceiver`, a reader thread feeding a :class:`CommandFilter`.
+* :mod:`.keys` -- where a car's link key comes from (its key file) and how one is made.
 
-Imports point one way: ``receiver`` and ``link`` use ``codec``, ``link`` uses ``receiver``.
+Imports point one way: ``receiver``, ``keys`` and ``link`` use ``codec``, ``link`` uses
+``receiver`` and ``keys``.
 Everything public is re-exported here, so callers import from ``trustfg.bridge.carlink``.
 """
 
 from .codec import (
     DATAGRAM_SIZE,
+    DATAGRAM_V2_SIZE,
+    KEY_BYTES,
+    MAC_BYTES,
     MAGIC,
     SEQ_MODULUS,
+    SOURCE_CAR_PROCESS,
+    SOURCE_OPERATOR,
     VERSION,
+    VERSION_2,
     CarLinkError,
     Command,
     Flags,
     decode_command,
+    decode_command_v2,
     encode_command,
+    encode_command_v2,
     seq_after,
 )
+from .keys import link_key, new_key, write_key_file
 from .link import (
     Clock,
     CommandReceiver,
     CommandSender,
     SenderStats,
+    new_session,
 )
 from .receiver import (
     DEFAULT_RESYNC_AFTER_S,
@@ -41,8 +53,10 @@ from .receiver import (
 )
 
 __all__ = [
-    "DATAGRAM_SIZE", "MAGIC", "SEQ_MODULUS", "VERSION", "CarLinkError", "Command", "Flags",
-    "decode_command", "encode_command", "seq_after",
+    "DATAGRAM_SIZE", "DATAGRAM_V2_SIZE", "KEY_BYTES", "MAC_BYTES", "MAGIC", "SEQ_MODULUS",
+    "SOURCE_CAR_PROCESS", "SOURCE_OPERATOR", "VERSION", "VERSION_2", "CarLinkError", "Command",
+    "Flags", "decode_command", "decode_command_v2", "encode_command", "encode_command_v2", "seq_after",
+    "link_key", "new_key", "write_key_file", "new_session",
     "DEFAULT_RESYNC_AFTER_S", "DEFAULT_WATCHDOG_TIMEOUT_S", "CommandFilter", "FilterCounters",
     "Clock", "CommandReceiver", "CommandSender", "SenderStats",
 ]

@@ -4,7 +4,10 @@ The bytes are in :mod:`.codec`, the receiving rules in :mod:`.receiver`; this mo
 moves datagrams between them and UDP sockets.
 
 Sender (:class:`CommandSender`): one datagram per :meth:`~CommandSender.send`, numbered
-and stamped. It keeps no schedule of its own: the car process's control loop calls
+and stamped; version 2 (authenticated, a new session per sender) when it has the car's
+key, version 1 without. :meth:`CommandSender.for_car` picks the version, the key and the
+address from a car's config, so every sender of a car (its car process, an operator's
+e-stop) speaks what the car expects. It keeps no schedule of its own: the car process's control loop calls
 ``send()`` at ``control.command_rate_hz`` (50 Hz) on absolute deadlines, and a late tick
 sends once rather than catching up in a burst (``fleet/ticker.py``). On shutdown it sends
 a few STOP datagrams, with E_STOP if the last command had it.
@@ -22,7 +25,19 @@ import time
 from dataclasses import dataclass
 from typing import Callable
 
-from .codec import SEQ_MODULUS, Command, Flags, _check_int, encode_command
+from ...agent.config import CarConfig, parse_udp_address
+from .codec import (
+    SEQ_MODULUS,
+    SESSION_MODULUS,
+    SOURCE_CAR_PROCESS,
+    Command,
+    Flags,
+    _check_int,
+    check_key,
+    encode_command,
+    encode_command_v2,
+)
+from .keys import link_key
 from .receiver import (
     DEFAULT_RESYNC_AFTER_S,
     DEFAULT_WATCHDOG_TIMEOUT_S,
@@ -33,10 +48,22 @@ from .receiver import (
 log = logging.getLogger(__name__)
 
 # recv buffer larger than a datagram, so an oversized datagram is seen (wrong length)
-# rather than silently truncated to 30 bytes.
+# rather than silently truncated to 30 (or 52) bytes.
 _RECV_BUFFER_BYTES = 2048
 
 Clock = Callable[[], float]
+
+_session_lock = threading.Lock()
+_last_session = 0
+
+
+def new_session() -> int:
+    """A version-2 session id: the wall clock in microseconds, strictly increasing within
+    this process (two senders started in the same microsecond still differ)."""
+    global _last_session
+    with _session_lock:
+        _last_session = max(time.time_ns() // 1000, _last_session + 1) % SESSION_MODULUS
+        return _last_session
 
 
 @dataclass(frozen=True)
@@ -68,16 +95,23 @@ class CommandSender:
     ``stop_repeats`` STOP datagrams, keeping E_STOP if the last command given to
     :meth:`send` had it, so shutting down never releases a car's e-stop; ``close()``
     (also on leaving a ``with`` block) stops and closes the socket. Sequence numbers start
-    at ``first_seq`` and wrap. ``stamp_clock`` stamps datagrams -- pass the fleet clock.
+    at ``first_seq`` and wrap (version 2: a new session instead). ``stamp_clock`` stamps
+    datagrams -- pass the fleet clock. With ``key`` it sends version 2 as ``source``
+    (codec.SOURCE_CAR_PROCESS, SOURCE_OPERATOR, ...) in a session of its own.
     Safe to call from two threads (a control thread sending, the main thread stopping).
     """
 
-    def __init__(self, car_id: int, address: tuple[str, int], *, stamp_clock: Clock = time.monotonic,
+    def __init__(self, car_id: int, address: tuple[str, int], *, key: bytes | None = None,
+                 source: int = SOURCE_CAR_PROCESS, stamp_clock: Clock = time.monotonic,
                  first_seq: int = 0, stop_repeats: int = 3, stop_spacing_s: float = 0.005,
                  send_timeout_s: float = 0.1):
         _check_int("car_id", car_id, 1, 255)
         _check_int("seq", first_seq, 0, SEQ_MODULUS - 1)
+        _check_int("source", source, 0, 255)
         self.car_id = car_id
+        self._key = check_key(key) if key is not None else None
+        self.source = source
+        self.session = new_session() if self._key is not None else 0
         self._stamp_clock = stamp_clock
         self._seq = first_seq
         self._stop_repeats = stop_repeats
@@ -89,6 +123,17 @@ class CommandSender:
         self._last_flags = Flags.NONE
         self._sent = 0
         self._send_errors = 0
+
+    @classmethod
+    def for_car(cls, car: CarConfig, *, source: int = SOURCE_CAR_PROCESS, **options) -> "CommandSender":
+        """A sender to ``car`` as its config says: its ``link`` address, and version 2 with
+        its key unless it asks for version 1. ConfigError for a missing or bad key."""
+        host, port = parse_udp_address(car.link, f"cars[id={car.id}].link")
+        return cls(car.id, (host, port), key=link_key(car), source=source, **options)
+
+    @property
+    def version(self) -> int:
+        return 1 if self._key is None else 2
 
     def __enter__(self) -> CommandSender:
         return self
@@ -110,13 +155,17 @@ class CommandSender:
         with self._lock:
             if self._sock is None:
                 raise RuntimeError(f"car {self.car_id}: sender is closed")
-            cmd = Command(self.car_id, self._seq, self._stamp_clock(), v_mps, omega_radps, flags)
+            cmd = Command(self.car_id, self._seq, self._stamp_clock(), v_mps, omega_radps, flags,
+                          self.session, self.source)
             self._seq = (self._seq + 1) % SEQ_MODULUS
+            if self._seq == 0 and self._key is not None:  # version 2 never wraps: a new session
+                self.session = new_session()
             # What the caller asked for, even if the socket fails: stop() keeps an e-stop
             # whose own datagram was lost.
             self._last_flags = cmd.flags
+            datagram = encode_command(cmd) if self._key is None else encode_command_v2(cmd, self._key)
             try:
-                self._sock.sendto(encode_command(cmd), self._sockaddr)
+                self._sock.sendto(datagram, self._sockaddr)
             except OSError as exc:
                 self._send_errors += 1
                 log.warning("car %d: send of seq %d failed: %s", self.car_id, cmd.seq, exc)
@@ -156,14 +205,14 @@ class CommandReceiver:
     The socket is bound on construction (``address`` tells the port when 0 was asked
     for); the reader runs between :meth:`start` (or entering a ``with`` block) and
     :meth:`close`. ``clock`` stamps arrivals and is the default ``now`` of
-    :meth:`active_command`.
+    :meth:`active_command`. With ``key`` the car speaks version 2 (see :mod:`.receiver`).
     """
 
-    def __init__(self, car_id: int, bind_address: tuple[str, int], *,
+    def __init__(self, car_id: int, bind_address: tuple[str, int], *, key: bytes | None = None,
                  watchdog_timeout_s: float = DEFAULT_WATCHDOG_TIMEOUT_S,
                  resync_after_s: float = DEFAULT_RESYNC_AFTER_S, clock: Clock = time.monotonic,
                  recv_timeout_s: float = 0.1, join_timeout_s: float = 1.0):
-        self._filter = CommandFilter(car_id, watchdog_timeout_s=watchdog_timeout_s,
+        self._filter = CommandFilter(car_id, key=key, watchdog_timeout_s=watchdog_timeout_s,
                                      resync_after_s=resync_after_s)
         self.car_id = car_id
         self._clock = clock

@@ -5,24 +5,39 @@ real car. The bytes themselves are in :mod:`.codec`; sockets and threads in :mod
 
 Receiver rules (what the car firmware does; :class:`CommandFilter`)
 ---------------------------------------------------------------------
-1. Decode; drop invalid datagrams and datagrams for another car id.
-2. Sequence numbers compare with serial-number arithmetic (RFC 1982, 32 bits): ``s`` is
-   after ``last`` iff ``0 < (s - last) mod 2**32 < 2**31``. Only a datagram after the
-   last accepted one is accepted: repeats, replays and datagrams overtaken on the air
-   are dropped. The first datagram ever is accepted whatever its seq.
-3. Restarted sender: a restarted car process starts a new sequence, which usually looks
-   "old". If no datagram has been *accepted* for ``resync_after_s`` (default 1.0 s), the
-   next valid datagram is accepted whatever its seq and becomes the new reference.
-   This is safe because ``resync_after_s`` is longer than the watchdog, so the car has
-   been standing still for a while when a new sequence is adopted, and whatever comes
-   next is again watched by the watchdog. Silence is measured from the last accepted
-   datagram, so a new sender's stream of "old" numbers cannot postpone the resync
-   forever. (The CRC detects corruption, not forgery: the link is not authenticated,
-   and after a silence a replayed capture looks like a restarted sender.)
+1. Decode; drop invalid datagrams and datagrams for another car id. A car with a key
+   decodes version 2 only (a bad MAC is dropped as ``mac``); a car without one, version 1.
+2. Version 2 -- sessions (replays are refused, also across a sender's restart). Per
+   ``source`` (the car process, the operator, ...) the car keeps the newest session it has
+   accepted and the last sequence number in it:
+
+   * a datagram of that session is accepted only if its seq is larger than the last one
+     (a repeat or an older one is a replay, or overtaken on the air: dropped);
+   * a datagram of a *larger* session is a restarted sender: accepted, and from now on
+     that source's older sessions are refused (``old_session``), however long it is quiet;
+   * a datagram of a smaller session is refused (``old_session``).
+
+   Session ids are the sender's start time in microseconds, so they grow across restarts
+   (a sender whose clock was set back by more than its run time is refused until it passes
+   -- it fails safe, standing). Limits: the car's memory of sessions is lost when the car
+   itself reboots, after which the first authentic datagram of any session is taken (keep
+   the newest session per source in non-volatile memory to close this); and a datagram
+   held back by an attacker may still arrive late, within its session's order (the
+   watchdog bounds what a withheld stream can do).
+3. Version 1 -- sequence numbers compare with serial-number arithmetic (RFC 1982, 32 bits):
+   ``s`` is after ``last`` iff ``0 < (s - last) mod 2**32 < 2**31``. Only a datagram after
+   the last accepted one is accepted. The first datagram ever is accepted whatever its seq.
+   Restarted sender: if no datagram has been *accepted* for ``resync_after_s`` (default
+   1.0 s), the next valid datagram is accepted whatever its seq. (The CRC detects
+   corruption, not forgery: after a silence a replayed capture looks like a restarted
+   sender -- version 2 exists for that.)
 4. Watchdog: the command to apply is (0, 0) once the last accepted command is
    ``watchdog_timeout_s`` (default 0.250 s) old, measured on the receiver's clock (the
    sender's stamp is for logs and latency only; the clocks need not agree).
-5. (0, 0) also while E_STOP is latched, or while the latest command has STOP.
+5. (0, 0) also while E_STOP is latched, or while the latest command has STOP. E_STOP is
+   latched per source: it is released only by a datagram *from the source that set it*
+   without the bit, so one sender (the car process) cannot release another's (the
+   operator's) e-stop. (Version 1 has one source.)
 """
 
 from __future__ import annotations
@@ -32,7 +47,7 @@ from collections import Counter
 from dataclasses import dataclass, field
 from typing import Mapping
 
-from .codec import CarLinkError, Command, _check_int, decode_command, seq_after
+from .codec import CarLinkError, Command, _check_int, check_key, decode_command, decode_command_v2, seq_after
 
 log = logging.getLogger(__name__)
 
@@ -45,8 +60,11 @@ class FilterCounters:
     """A snapshot of what a :class:`CommandFilter` accepted and rejected.
 
     ``resynced`` counts accepted datagrams whose seq was not after the last one and that
-    were taken under the restart rule (they are also in ``accepted``).
-    ``decode_errors`` maps a :class:`CarLinkError` reason to its count.
+    were taken under the version-1 restart rule; ``new_session`` accepted version-2
+    datagrams that opened a newer session of their source (both are also in ``accepted``).
+    ``old_session`` counts version-2 datagrams of a session older than their source's
+    newest. ``decode_errors`` maps a :class:`CarLinkError` reason to its count (a bad MAC
+    is ``"mac"``).
     """
 
     accepted: int = 0
@@ -55,6 +73,8 @@ class FilterCounters:
     stale_seq: int = 0
     repeated_seq: int = 0
     decode_errors: Mapping[str, int] = field(default_factory=dict)
+    new_session: int = 0
+    old_session: int = 0
 
     @property
     def decode_error(self) -> int:
@@ -62,19 +82,22 @@ class FilterCounters:
 
     @property
     def rejected(self) -> int:
-        return self.decode_error + self.wrong_car + self.stale_seq + self.repeated_seq
+        return self.decode_error + self.wrong_car + self.stale_seq + self.repeated_seq + self.old_session
 
 
 class CommandFilter:
     """The car's side of the link: which datagrams to accept and what to apply now.
 
-    Pure and single-threaded; times are seconds on the receiver's clock. See this module's
-    docstring, "Receiver rules", for the rules and why the restart rule is safe.
+    Pure and single-threaded; times are seconds on the receiver's clock. With ``key`` (the
+    car's 32-byte link key) it speaks version 2, without one version 1. See this module's
+    docstring, "Receiver rules", for the rules and why the restart rules are safe.
     """
 
-    def __init__(self, car_id: int, *, watchdog_timeout_s: float = DEFAULT_WATCHDOG_TIMEOUT_S,
+    def __init__(self, car_id: int, *, key: bytes | None = None,
+                 watchdog_timeout_s: float = DEFAULT_WATCHDOG_TIMEOUT_S,
                  resync_after_s: float = DEFAULT_RESYNC_AFTER_S):
         _check_int("car_id", car_id, 1, 255)
+        self._key = check_key(key) if key is not None else None
         if not watchdog_timeout_s > 0.0:
             raise ValueError(f"watchdog_timeout_s must be > 0, got {watchdog_timeout_s}")
         if not resync_after_s > watchdog_timeout_s:
@@ -85,7 +108,8 @@ class CommandFilter:
         self.resync_after_s = resync_after_s
         self._last: Command | None = None
         self._last_time_s = 0.0
-        self._e_stop_latched = False
+        self._e_stop_sources: set[int] = set()
+        self._sessions: dict[int, tuple[int, int]] = {}  # version 2: source -> (session, last seq)
         self._counts: Counter[str] = Counter()
         self._decode_errors: Counter[str] = Counter()
 
@@ -95,15 +119,20 @@ class CommandFilter:
         return self._last
 
     @property
+    def version(self) -> int:
+        return 1 if self._key is None else 2
+
+    @property
     def e_stop_latched(self) -> bool:
-        return self._e_stop_latched
+        return bool(self._e_stop_sources)
 
     @property
     def counters(self) -> FilterCounters:
         return FilterCounters(accepted=self._counts["accepted"], resynced=self._counts["resynced"],
                               wrong_car=self._counts["wrong_car"], stale_seq=self._counts["stale_seq"],
                               repeated_seq=self._counts["repeated_seq"],
-                              decode_errors=dict(self._decode_errors))
+                              decode_errors=dict(self._decode_errors), new_session=self._counts["new_session"],
+                              old_session=self._counts["old_session"])
 
     def accept(self, data: bytes, now_s: float) -> Command | None:
         """Decode and filter one datagram received at ``now_s``; None (counted) if dropped.
@@ -111,7 +140,7 @@ class CommandFilter:
         Never raises for any bytes-like input.
         """
         try:
-            cmd = decode_command(data)
+            cmd = decode_command(data) if self._key is None else decode_command_v2(data, self._key)
         except CarLinkError as exc:
             self._decode_errors[exc.reason] += 1
             log.debug("car %d: dropped invalid datagram (%s)", self.car_id, exc)
@@ -120,7 +149,7 @@ class CommandFilter:
             self._counts["wrong_car"] += 1
             log.debug("car %d: dropped datagram for car %d", self.car_id, cmd.car_id)
             return None
-        if not self._sequence_ok(cmd, now_s):
+        if not (self._sequence_ok(cmd, now_s) if self._key is None else self._session_ok(cmd)):
             return None
         self._take(cmd, now_s)
         return cmd
@@ -128,7 +157,7 @@ class CommandFilter:
     def active_command(self, now_s: float) -> tuple[float, float]:
         """The (v_mps, omega_radps) to apply at ``now_s``: (0, 0) when stopped for any reason."""
         cmd = self._last
-        if cmd is None or self._e_stop_latched or cmd.stop:
+        if cmd is None or self._e_stop_sources or cmd.stop:
             return 0.0, 0.0
         if now_s - self._last_time_s >= self.watchdog_timeout_s:
             return 0.0, 0.0
@@ -148,12 +177,37 @@ class CommandFilter:
         log.debug("car %d: dropped seq %d (%s, last %d)", self.car_id, cmd.seq, key, last.seq)
         return False
 
+    def _session_ok(self, cmd: Command) -> bool:
+        """Version 2: per source, only the newest session, and in it only a larger seq."""
+        current = self._sessions.get(cmd.source)
+        if current is None or cmd.session > current[0]:
+            if current is not None:
+                log.info("car %d: source %d started session %d (was %d)", self.car_id, cmd.source,
+                         cmd.session, current[0])
+            self._counts["new_session"] += 1
+            self._sessions[cmd.source] = (cmd.session, cmd.seq)
+            return True
+        session, last_seq = current
+        if cmd.session < session:
+            self._counts["old_session"] += 1
+            log.debug("car %d: dropped datagram of old session %d (source %d is at %d)", self.car_id,
+                      cmd.session, cmd.source, session)
+            return False
+        if cmd.seq <= last_seq:
+            key = "repeated_seq" if cmd.seq == last_seq else "stale_seq"
+            self._counts[key] += 1
+            log.debug("car %d: dropped seq %d (%s, last %d)", self.car_id, cmd.seq, key, last_seq)
+            return False
+        self._sessions[cmd.source] = (session, cmd.seq)
+        return True
+
     def _take(self, cmd: Command, now_s: float) -> None:
-        if cmd.e_stop and not self._e_stop_latched:
-            log.warning("car %d: E-STOP latched (seq %d)", self.car_id, cmd.seq)
-        elif self._e_stop_latched and not cmd.e_stop:
-            log.warning("car %d: E-STOP released (seq %d)", self.car_id, cmd.seq)
-        self._e_stop_latched = cmd.e_stop
+        if cmd.e_stop and cmd.source not in self._e_stop_sources:
+            log.warning("car %d: E-STOP latched by source %d (seq %d)", self.car_id, cmd.source, cmd.seq)
+            self._e_stop_sources.add(cmd.source)
+        elif not cmd.e_stop and cmd.source in self._e_stop_sources:
+            log.warning("car %d: E-STOP released by source %d (seq %d)", self.car_id, cmd.source, cmd.seq)
+            self._e_stop_sources.discard(cmd.source)
         self._last = cmd
         self._last_time_s = now_s
         self._counts["accepted"] += 1
