@@ -7,8 +7,10 @@ Per scene and method, every seed is one in-process run (fleet.fleet_sim, or
 fleet.baselines for ORCA) with the same start delays and cruise speeds for every method
 (fleet_sim.draw_departures from the seed). Methods:
 
-* ``full``: the whole pipeline as shipped (every trust factor, and whatever the car
-  pipeline switches on by default);
+* ``full``: the whole pipeline as shipped: every trust factor, and the car pipeline's
+  plan verification with its retries and braking fallback, the proximity guard and the
+  deadlock watch (fleet.fleet_sim runs them as the car process does; ``--set
+  verify.enabled=false`` and the like switch them off);
 * ``fixed``: no trust factors (no consistency factor, no transparency scaling): the
   proximity hinge at eps_0 from every peer; the rest of the pipeline as in ``full``;
 * ``wide``: the same with 2 eps_0 from every peer (trust.epsilon_gain_fixed = 2);

@@ -54,9 +54,8 @@ from ..agent.scenario_files import load_scenario
 from ..agent.world import build_sdf
 from ..bridge import natnet
 from ..bridge.carlink import CommandSender, Flags, link_key
-from ..bridge.guard import speed_cap
+from ..bridge.drive import drive
 from ..bridge.natnet_client import NatNetClient, NatNetClientOptions
-from ..bridge.tracking import track
 from .bus import FleetBus, Received
 from .command import configured, stop_on_signals
 from .laps import Laps
@@ -135,7 +134,7 @@ class CarProcess:
         link_key(car)  # a missing or bad key is a config error now, not when driving
         self.stop = threading.Event()
         self.agent = CarAgent(car=car, scenario=scenario, sdf=build_sdf(scenario.world),
-                              depart_at=math.inf)
+                              depart_at=math.inf, clock=time.perf_counter)
         self.inbox = messages.Inbox()
         self.frames: deque = deque(maxlen=4096)
         self.counters: Counter = Counter()
@@ -240,17 +239,12 @@ class CarProcess:
         elif plan is None or not self.started or now < self.agent.depart_at or self.agent.at_goal:
             self.control.stops += 1
             sender.send(0.0, 0.0, Flags.STOP)
-        else:
-            v, omega = track(plan, now, pose[0], pose[1], pose[2], self.scenario.tracking,
-                             self.scenario.vehicle)
-            if self.scenario.guard.enabled:
-                cap = speed_cap(*pose, self.car.radius_m, self._others_seen(natnet_client),
-                                self.scenario.guard, self.scenario.safety, self.agent.sdf)
-                if v > cap:
-                    v = cap
-                    self.control.guard_limited += 1
-            sender.send(v, omega)
-            self._watch_motion(now, pose, v)
+        else:  # the control step both simulations share (bridge.drive)
+            command = drive(plan, now, pose, True, lambda: self._others_seen(natnet_client), self.car.radius_m,
+                            self.scenario, self.agent.sdf)
+            self.control.guard_limited += command.guard_limited
+            sender.send(command.v, command.omega)
+            self._watch_motion(now, pose, command.v)
         self.control.sent += 1
 
     def _watch_motion(self, now: float, pose: tuple[float, float, float], v_commanded: float) -> None:
@@ -397,7 +391,7 @@ class CarProcess:
         bus.publish("status", messages.encode(messages.StatusMessage(
             self.car.id, self._seq["status"], self.clock(), self.state,
             last.time_ms if last else 0.0, last.iterations if last else 0, self.arrived,
-            dict(sorted(counters.items(), key=lambda kv: not kv[0].startswith("plan_age"))[:64]))))
+            dict(sorted(counters.items(), key=lambda kv: not kv[0].startswith(("plan", "deadlock")))[:64]))))
 
     def _write_stats(self, path: Path, natnet_client: NatNetClient, bus: FleetBus,
                      sender: CommandSender) -> None:

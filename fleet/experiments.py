@@ -1,6 +1,6 @@
 """The paper's experiments, each run with its factor on and off over many seeds.
 
-    trustfg experiment {proximity,consistency,transparency,lab,all} [--seed N] [--seeds K]
+    trustfg experiment {proximity,consistency,transparency,lab,pipeline,all} [--seed N] [--seeds K]
                        [--out DIR] [--jobs J]
     trustfg experiment bank ...        (the scenario bank and its baselines: fleet.bank)
 
@@ -37,7 +37,7 @@ from ..agent.scenario_files import load_scenario
 from ..agent.world import build_sdf
 from .command import configured
 from .fleet_sim import simulate
-from .runs import RunRecord, motion_summary, rounded
+from .runs import RunRecord, motion_summary, plan_outcomes, rounded
 
 log = logging.getLogger(__name__)
 
@@ -65,6 +65,22 @@ NO_TRUST = dict(proximity=True, consistency=False, transparency=False)
 """The fair "off": avoidance without trust, the proximity hinge at eps_0 from every peer."""
 
 
+def no_avoidance(scenario: Scenario) -> Scenario:
+    """The paper's "off": no trust factor, and nothing else that keeps cars apart either
+    (plan verification and the proximity guard switched off too)."""
+    return dataclasses.replace(factors(scenario, **ALL_OFF),
+                               verify=dataclasses.replace(scenario.verify, enabled=False),
+                               guard=dataclasses.replace(scenario.guard, enabled=False))
+
+
+def mechanisms(scenario: Scenario, verify: bool = True, guard: bool = True, deadlock: bool = True) -> Scenario:
+    """Every trust factor on, and the pipeline's mechanisms switched as given."""
+    return dataclasses.replace(factors(scenario, **ALL_ON),
+                               verify=dataclasses.replace(scenario.verify, enabled=verify),
+                               guard=dataclasses.replace(scenario.guard, enabled=guard),
+                               deadlock=dataclasses.replace(scenario.deadlock, enabled=deadlock))
+
+
 @dataclass(frozen=True)
 class Experiment:
     name: str
@@ -77,9 +93,9 @@ EXPERIMENTS = {
     "proximity": Experiment(
         "proximity", "intersection",
         {"on": functools.partial(factors, **ALL_ON), "fixed": functools.partial(factors, **NO_TRUST),
-         "off": functools.partial(factors, **ALL_OFF)},
+         "off": no_avoidance},
         "Do the trust factors prevent proximity breaches on conflicting routes? (fixed: no trust factors, "
-        "eps_0 from every peer; off: no avoidance)"),
+        "eps_0 from every peer; off: no avoidance, no verification, no guard)"),
     "consistency": Experiment(
         "consistency", "intersection",
         {"on": functools.partial(factors, **ALL_ON),
@@ -96,7 +112,18 @@ EXPERIMENTS = {
          "on": lambda s: factors(with_liar(s), **ALL_ON),
          "off": lambda s: factors(with_liar(s), **(ALL_ON | dict(transparency=False)))},
         "The paper's lab left turns: A all honest, B car 1 at 40 % misinformation."),
+    "pipeline": Experiment(
+        "pipeline", "intersection-8",
+        {"on": functools.partial(mechanisms),
+         "no_verify": functools.partial(mechanisms, verify=False),
+         "no_guard": functools.partial(mechanisms, guard=False),
+         "no_deadlock": functools.partial(mechanisms, deadlock=False),
+         "planner_only": functools.partial(mechanisms, verify=False, guard=False, deadlock=False)},
+        "What does each safety mechanism under the planner add (plan verification with its "
+        "fallback, the proximity guard, deadlock resolution)?"),
 }
+PAPER = ("proximity", "consistency", "transparency", "lab")
+"""What ``trustfg experiment all`` runs: the paper's experiments."""
 
 
 # --- one run ---------------------------------------------------------------------------------
@@ -118,7 +145,7 @@ def summarise(scenario: Scenario, record: RunRecord) -> dict:
         "trust": rounded(record.trust[-1]),
         "replan_ms_median": round(float(np.median(np.concatenate(record.replan_ms))), 2)
         if any(record.replan_ms) else None,
-    }
+    } | plan_outcomes(record.counters)
     if "liar_id" in run:
         liar = record.car_ids.index(run["liar_id"])
         honest = [record.car_ids.index(i) for i in run["honest_ids"]]
@@ -214,6 +241,11 @@ def summary(name: str, results: dict[str, list[dict]]) -> dict:
             "inconsistency_mean": round(float(np.mean([r["inconsistency"] for r in runs])), 4),
             "inconsistency_median": round(float(np.median([r["inconsistency"] for r in runs])), 4),
             "replan_ms_median": _median([r["replan_ms_median"] for r in runs if r["replan_ms_median"] is not None]),
+            "success": sum(1 for r in runs if all(r["reached_goal"]) and not r["breaches"]),
+            "plans_fallback_share": _share(runs, "fallback"),
+            "plans_retry_share": _share(runs, "retry"),
+            "deadlocks": sum(r.get("deadlocks", 0) for r in runs),
+            "runs_with_deadlock": sum(1 for r in runs if r.get("deadlocks", 0)),
         }
         if runs and "liar_min_distance" in runs[0]:
             liar = [d for r in runs for d in r["liar_min_distance"]]
@@ -235,6 +267,12 @@ def summary(name: str, results: dict[str, list[dict]]) -> dict:
     return out
 
 
+def _share(runs: list[dict], outcome: str) -> float | None:
+    """The share of all replans of these runs that ended in ``outcome``."""
+    total = sum(sum(r["plans"].values()) for r in runs if "plans" in r)
+    return round(sum(r["plans"][outcome] for r in runs if "plans" in r) / total, 4) if total else None
+
+
 def _median(values: list[float]) -> float | None:
     return round(float(np.median(values)), 3) if values else None
 
@@ -246,7 +284,8 @@ def print_table(report: dict, stream=sys.stdout) -> None:
     name, s = report["experiment"], report["summary"]
     print(f"\n== {name} ({report['scenario']}, {len(report['seeds'])} seeds): {report['question']}", file=stream)
     cols = ["runs", "seeds_with_breach", "min_clearance_m", "obstacle_min_clearance_m", "all_reached_goal",
-            "makespan_median_s", "inconsistency_mean", "replan_ms_median"]
+            "success", "makespan_median_s", "inconsistency_mean", "replan_ms_median", "plans_retry_share",
+            "plans_fallback_share", "deadlocks", "runs_with_deadlock"]
     extra = ["liar_min_distance_median_m", "honest_trust_min_after_settle", "trust_gap_min_after_settle",
              "trust_separated_at_s_max"]
     variants = [v for v in report["variants"]]
@@ -325,7 +364,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.seeds < 1:
         parser.error("--seeds must be at least 1")
     out = args.out or Path("runs") / time.strftime("experiment-%Y%m%d-%H%M%S")
-    names = list(EXPERIMENTS) if args.name == "all" else [args.name]
+    names = list(PAPER) if args.name == "all" else [args.name]
     seeds = list(range(args.seed, args.seed + args.seeds))
     if args.scenario:
         configured("trustfg experiment", lambda: load_scenario(args.scenario))

@@ -22,11 +22,11 @@ import numpy as np
 
 from ..agent import messages
 from ..agent.car_agent import CarAgent
-from ..agent.config import Scenario
+from ..agent.config import Scenario, SimConfig
 from ..agent.vehicle import VehicleState
 from ..agent.vehicle import step as vehicle_step
 from ..agent.world import SignedDistanceField, build_sdf
-from ..bridge.tracking import track
+from ..bridge.drive import drive
 from .runs import RunRecord
 
 RECORD_TRUST_PERIOD_S = 0.1
@@ -66,18 +66,13 @@ def simulate(scenario: Scenario, seed: int, sdf: SignedDistanceField | None = No
     inboxes = [messages.Inbox() for _ in cars]
     vehicles = [VehicleState(c.start[0], c.start[1], c.start_heading) for c in cars]
 
-    queue: list[tuple[float, int, int, bytes]] = []  # (deliver_at, order, sender index, payload)
-    order = 0
-
-    def publish(sender: int, message: messages.Message, now: float) -> None:
-        nonlocal order
-        heapq.heappush(queue, (now + sim.message_latency_s, order, sender, messages.encode(message)))
-        order += 1
+    network = Network(sim, n, np.random.default_rng([seed, 11]))
 
     steps = int(math.ceil(sim.timeout_s / step_s)) + 1
     times, states = [], []
     trust_times, trust_rows, transparency_rows, epsilon_rows = [], [], [], []
     arrived: list[float | None] = [None] * n
+    guard_limited = [0] * n
     plan_log: list = []
     next_replan = phase.copy()
     next_report = rng.uniform(0.0, control.trust_report_period_s, n)
@@ -86,19 +81,17 @@ def simulate(scenario: Scenario, seed: int, sdf: SignedDistanceField | None = No
     for k in range(steps):
         t = k * step_s
         # 1. Deliver due messages through each receiver's inbox (decode + order/replay filter).
-        while queue and queue[0][0] <= t + 1e-9:
-            _, _, sender, payload = heapq.heappop(queue)
-            for j, agent in enumerate(agents):
-                if j == sender:
-                    continue
-                message = inboxes[j].accept(payload, key_sender=ids[sender])
-                if message is not None:
-                    agent.receive(message, t)
+        for sender, receiver, payload in network.due(t):
+            message = inboxes[receiver].accept(payload, key_sender=ids[sender])
+            if message is not None:
+                agents[receiver].receive(message, t)
         # 2. Everyone sees everyone (mocap), with noise.
+        seen = np.empty((n, n, 3))  # seen[j, i]: car i as car j sees it
         for i, state in enumerate(vehicles):
             noisy = noise_rng.normal(0.0, sim.observation_noise_m, (n, 2))
+            seen[:, i] = np.column_stack([state.x + noisy[:, 0], state.y + noisy[:, 1], np.full(n, state.yaw)])
             for j, agent in enumerate(agents):
-                agent.observe(t, ids[i], state.x + noisy[j, 0], state.y + noisy[j, 1], state.yaw)
+                agent.observe(t, ids[i], *seen[j, i])
         # 3. Evidence, replanning, reports.
         for i, agent in enumerate(agents):
             agent.gather_evidence(t)
@@ -109,10 +102,10 @@ def simulate(scenario: Scenario, seed: int, sdf: SignedDistanceField | None = No
                     plan_log.append((t, i, agent.plan))
                 outgoing = agent.plan_message(t)
                 if outgoing is not None:
-                    publish(i, outgoing, t)
+                    network.publish(i, messages.encode(outgoing), t)
             if t + 1e-9 >= next_report[i]:
                 next_report[i] += control.trust_report_period_s
-                publish(i, agent.trust_message(t), t)
+                network.publish(i, messages.encode(agent.trust_message(t)), t)
         if record_trust and t + 1e-9 >= next_trust_record:
             next_trust_record += RECORD_TRUST_PERIOD_S
             trust_times.append(t)
@@ -127,13 +120,12 @@ def simulate(scenario: Scenario, seed: int, sdf: SignedDistanceField | None = No
             state = vehicles[i]
             if arrived[i] is None and math.hypot(state.x - cars[i].goal[0], state.y - cars[i].goal[1]) <= scenario.arrival_radius_m:
                 arrived[i] = t
-            if t < depart[i] or agent.plan is None or agent.at_goal:
-                v_cmd, w_cmd = 0.0, 0.0
-            else:
-                own = agent.tracks[ids[i]].motion()
-                v_cmd, w_cmd = track(agent.plan, t, own.position[0], own.position[1], own.yaw,
-                                     scenario.tracking, scenario.vehicle)
-            vehicles[i] = vehicle_step(state, v_cmd, w_cmd, step_s, scenario.vehicle)
+            own = agent.tracks[ids[i]].motion()
+            others = [(*seen[i, j], cars[j].radius_m) for j in range(n) if j != i]
+            command = drive(agent.plan, t, (own.position[0], own.position[1], own.yaw),
+                            t >= depart[i] and not agent.at_goal, lambda: others, cars[i].radius_m, scenario, sdf)
+            guard_limited[i] += command.guard_limited
+            vehicles[i] = vehicle_step(state, command.v, command.omega, step_s, scenario.vehicle)
         if all(a is not None for a in arrived) and all(abs(s.v) < 1e-3 for s in vehicles):
             break
 
@@ -150,7 +142,8 @@ def simulate(scenario: Scenario, seed: int, sdf: SignedDistanceField | None = No
         transparency=np.array(transparency_rows),
         epsilon=np.array(epsilon_rows),
         replan_ms=[list(a.replan_ms) for a in agents],
-        counters=[dict(a.counters) | {f"trust_{k}": v for k, v in a.trust.counters.items()} for a in agents],
+        counters=[dict(a.counters) | {f"trust_{k}": v for k, v in a.trust.counters.items()}
+                  | {"guard_limited": guard_limited[i]} | network.counters(i) for i, a in enumerate(agents)],
         inbox=[dict(box.dropped) | {f"accepted_{k}": v for k, v in box.accepted.items()} for box in inboxes],
         final_plans=[(a.plan.positions.copy(), a.plan.velocities.copy()) if a.plan is not None else
                      (np.zeros((0, 2)), np.zeros((0, 2))) for a in agents],
@@ -174,3 +167,44 @@ def _trust_snapshot(agents: list[CarAgent], ids: list[int], t: float):
             epsilon[a, b] = agent.trust.epsilon(peer, t, agent.epsilon_0(peer), planner.transparency)
     return trust, transparency, epsilon
 
+
+
+class Network:
+    """The fleet's messages in simulated time: per receiver, a message is lost with
+    probability ``sim.message_loss`` and otherwise arrives ``message_latency_s`` plus
+    U(0, ``message_jitter_s``) after it was sent, in the order it was sent on each
+    sender-receiver link (as over one Zenoh session's reliable link). Draws come from
+    their own generator, so a run without faults is the same run it always was."""
+
+    def __init__(self, sim: SimConfig, n: int, rng: np.random.Generator):
+        self.sim, self.n, self.rng = sim, n, rng
+        self.queue: list[tuple[float, int, int, int, bytes]] = []  # (at, order, sender, receiver, payload)
+        self.order = 0
+        self.last = np.zeros((n, n))  # latest delivery time per link
+        self.lost = [0] * n
+        self.sent = [0] * n
+
+    def publish(self, sender: int, payload: bytes, now: float) -> None:
+        self.sent[sender] += 1
+        for receiver in range(self.n):
+            if receiver == sender:
+                continue
+            if self.sim.message_loss > 0.0 and self.rng.random() < self.sim.message_loss:
+                self.lost[receiver] += 1
+                continue
+            delay = self.sim.message_latency_s
+            if self.sim.message_jitter_s > 0.0:
+                delay += self.rng.uniform(0.0, self.sim.message_jitter_s)
+            at = max(now + delay, self.last[sender, receiver])
+            self.last[sender, receiver] = at
+            heapq.heappush(self.queue, (at, self.order, sender, receiver, payload))
+            self.order += 1
+
+    def due(self, now: float):
+        """(sender, receiver, payload) of every message due by ``now``, in order."""
+        while self.queue and self.queue[0][0] <= now + 1e-9:
+            _, _, sender, receiver, payload = heapq.heappop(self.queue)
+            yield sender, receiver, payload
+
+    def counters(self, car: int) -> dict[str, int]:
+        return {"messages_lost": self.lost[car]} if self.sim.message_loss > 0.0 else {}

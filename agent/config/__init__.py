@@ -15,12 +15,13 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from .checks import ConfigError, parse_udp_address, positive, with_overrides
-from .planning import PlannerConfig, TrustConfig
+from .planning import DeadlockConfig, PlannerConfig, TrustConfig, VerifyConfig
 from .running import BusConfig, ControlConfig, GuardConfig, NatNetConfig, TrackingConfig, VehicleConfig
 from .scene import CarConfig, Obstacle, SafetyConfig, SimConfig, WorldConfig
 
 __all__ = [
     "ConfigError", "parse_udp_address", "positive", "with_overrides", "PlannerConfig", "TrustConfig",
+    "VerifyConfig", "DeadlockConfig",
     "BusConfig", "ControlConfig", "GuardConfig", "NatNetConfig", "TrackingConfig", "VehicleConfig",
     "CarConfig", "Obstacle", "SafetyConfig", "SimConfig", "WorldConfig", "Scenario", "PALETTE",
 ]
@@ -36,6 +37,8 @@ class Scenario:
     world: WorldConfig = field(default_factory=WorldConfig)
     planner: PlannerConfig = field(default_factory=PlannerConfig)
     trust: TrustConfig = field(default_factory=TrustConfig)
+    verify: VerifyConfig = field(default_factory=VerifyConfig)
+    deadlock: DeadlockConfig = field(default_factory=DeadlockConfig)
     safety: SafetyConfig = field(default_factory=SafetyConfig)
     vehicle: VehicleConfig = field(default_factory=VehicleConfig)
     tracking: TrackingConfig = field(default_factory=TrackingConfig)
@@ -57,7 +60,7 @@ class Scenario:
         bodies = [car.body_id for car in self.cars]
         if len(set(bodies)) != len(bodies):
             raise ConfigError(f"{prefix}cars: rigid-body ids must be unique, got {bodies}")
-        for name in ("world", "safety", "planner", "trust", "vehicle", "tracking", "guard", "sim", "control", "bus", "natnet"):
+        for name in ("world", "safety", "planner", "trust", "verify", "deadlock", "vehicle", "tracking", "guard", "sim", "control", "bus", "natnet"):
             getattr(self, name).validate(prefix + name)
 
     def car(self, car_id: int) -> CarConfig:

@@ -154,6 +154,10 @@ class SafetyConfig:
         """The obstacle hinge's threshold, centre to surface."""
         return radius + (self.clearance_m + self.obstacle_margin_m)
 
+    def obstacle_breach(self, radius: float) -> float:
+        """Centre-to-surface distance below which a car breaches the clearance to a wall."""
+        return radius + self.clearance_m
+
 
 @dataclass(frozen=True)
 class SimConfig:
@@ -162,6 +166,11 @@ class SimConfig:
 
     observation_noise_m: float = 0.002
     message_latency_s: float = 0.02
+    """In-process fleet: every fleet message arrives this late ..."""
+    message_jitter_s: float = 0.0
+    """... plus U(0, this), in order per sender and receiver (seeded per run)."""
+    message_loss: float = 0.0
+    """In-process fleet: the probability that a message is lost for a receiver (seeded)."""
     timeout_s: float = 45.0
     start_delay_max_s: float = 2.0
     """Each car waits U(0, this) before it moves: desynchronised starts per seed. On the
@@ -173,8 +182,11 @@ class SimConfig:
 
     def validate(self, path: str) -> None:
         positive(self.timeout_s, f"{path}.timeout_s")
-        if self.observation_noise_m < 0 or self.message_latency_s < 0 or self.start_delay_max_s < 0:
-            raise ConfigError(f"{path}: noise, latency and delay must be >= 0")
+        if (self.observation_noise_m < 0 or self.message_latency_s < 0 or self.message_jitter_s < 0
+                or self.start_delay_max_s < 0):
+            raise ConfigError(f"{path}: noise, latency, jitter and delay must be >= 0")
+        if not 0.0 <= self.message_loss < 1.0:
+            raise ConfigError(f"{path}.message_loss: must be within [0, 1)")
         lo, hi = self.cruise_speed_range_mps
         if not 0 < lo <= hi:
             raise ConfigError(f"{path}.cruise_speed_range_mps: need 0 < low <= high")

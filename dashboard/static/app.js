@@ -196,11 +196,17 @@ function renderCars(cars) {
     tr.dataset.car = c.id;
     const rate = k => (c.rates[k] ?? 0).toFixed(1);
     for (const v of [c.id, c.at_goal ? "arrived" : (c.state ?? "–"), c.replan_ms ?? "–", rate("plan"), rate("pose"),
-                     rate("trust"), c.last_heard_s === null ? "never" : `${c.last_heard_s.toFixed(1)} s ago`]) {
+                     rate("trust"), c.last_heard_s === null ? "never" : `${c.last_heard_s.toFixed(1)} s ago`,
+                     outcomes(c.outcomes)]) {
       tr.insertCell().textContent = v;
     }
     return tr;
   }));
+}
+
+function outcomes(o) {
+  if (!o) return "–";
+  return `${o.first}/${o.retry}/${o.fallback} · ${o.deadlocks}`;
 }
 
 function renderSource(src) {

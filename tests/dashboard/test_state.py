@@ -70,3 +70,11 @@ def test_cars_without_a_colour_take_the_palette_in_order(intersection):
     plain = dataclasses.replace(intersection, cars=tuple(dataclasses.replace(c, color="") for c in intersection.cars))
     view = FleetView(plain)
     assert [view.cars[c.id].color for c in plain.cars] == [css_color(name) for name in PALETTE[:len(plain.cars)]]
+
+
+def test_each_car_shows_how_its_replans_ended(intersection):
+    view = FleetView(intersection)
+    assert view.snapshot()["cars"][0]["outcomes"] is None
+    counters = {"plans_first": 40, "plans_retry": 3, "plans_fallback": 2, "deadlocks": 1}
+    view.update(messages.StatusMessage(1, 1, 1.0, "driving", 5.0, 2, False, counters), 1.0)
+    assert view.snapshot()["cars"][0]["outcomes"] == {"first": 40, "retry": 3, "fallback": 2, "deadlocks": 1}

@@ -80,6 +80,7 @@ def test_car_process_stops_without_pose_drives_after_start_and_stops_on_sigterm(
     summary = json.loads(stats.read_text())
     assert summary["control"]["stale_pose_stops"] > 0
     assert summary["control"]["sent"] > 50
+    assert summary["agent"].get("plans_first", 0) > 0  # its replans were verified (agent.safe_plan)
 
 
 def test_a_car_with_another_key_hears_nothing_from_the_car_process(one_car, tmp_path):
