@@ -8,13 +8,17 @@ Three pieces, each documented where it lives:
 * :mod:`.receiver` -- the car's rules (pure): :class:`CommandFilter`, which datagrams a car
   accepts and what it applies (sequence numbers, restarts, watchdog, E_STOP/STOP). Real
   firmware runs these rules; mocap_sim's simulated car runs this very class.
+* :mod:`.answer` -- the bytes a car sends back to a PING datagram (pure).
 * :mod:`.link` -- the sockets (thin I/O): :class:`CommandSender` for the car process and
+  the operator's tools (:func:`open_sender` builds it from a car's config) and
   :class:`CommandReceiver`, a reader thread feeding a :class:`CommandFilter`.
 
-Imports point one way: ``receiver`` and ``link`` use ``codec``, ``link`` uses ``receiver``.
+Imports point one way: ``answer``, ``receiver`` and ``link`` use ``codec``, ``receiver``
+uses ``answer``, ``link`` uses both.
 Everything public is re-exported here, so callers import from ``trustfg.bridge.carlink``.
 """
 
+from .answer import ANSWER_SIZE, Answer, CarState, decode_answer, encode_answer
 from .codec import (
     DATAGRAM_SIZE,
     MAGIC,
@@ -32,6 +36,7 @@ from .link import (
     CommandReceiver,
     CommandSender,
     SenderStats,
+    open_sender,
 )
 from .receiver import (
     DEFAULT_RESYNC_AFTER_S,
@@ -44,5 +49,6 @@ __all__ = [
     "DATAGRAM_SIZE", "MAGIC", "SEQ_MODULUS", "VERSION", "CarLinkError", "Command", "Flags",
     "decode_command", "encode_command", "seq_after",
     "DEFAULT_RESYNC_AFTER_S", "DEFAULT_WATCHDOG_TIMEOUT_S", "CommandFilter", "FilterCounters",
-    "Clock", "CommandReceiver", "CommandSender", "SenderStats",
+    "ANSWER_SIZE", "Answer", "CarState", "decode_answer", "encode_answer",
+    "Clock", "CommandReceiver", "CommandSender", "SenderStats", "open_sender",
 ]

@@ -12,16 +12,22 @@ Exactly 30 bytes, little-endian, no padding, IEEE 754 floats::
     8      8    f64   stamp_s      sender's fleet clock, seconds (finite)
     16     4    f32   v_mps        linear velocity, m/s (finite)
     20     4    f32   omega_radps  angular velocity, rad/s, counter-clockwise positive (finite)
-    24     2    u16   flags        bit 0 E_STOP, bit 1 STOP, bits 2..15 must be 0
+    24     2    u16   flags        bit 0 E_STOP, bit 1 STOP, bit 2 RELEASE, bit 3 PING,
+                                   bits 4..15 must be 0
     26     4    u32   crc32        CRC-32 over bytes 0..25
 
-Flags:
+Flags (what a car does with each is in :mod:`.receiver`):
 
-* ``E_STOP`` (0x0001): stop now and stay stopped (latched) until a valid command arrives
-  *without* this bit. The sender keeps E_STOP in every datagram while an e-stop is on,
-  including the STOP datagrams it sends when it shuts down.
+* ``E_STOP`` (0x0001): stop now and stay stopped (latched) until a datagram with RELEASE
+  arrives. Taken from any sender whatever its sequence number: the operator sends it
+  straight to the car, next to the car process's own stream.
 * ``STOP`` (0x0002): hold still while this is the latest command (not latched); v and
-  omega are ignored. Sent on shutdown and when the car process loses its pose.
+  omega are ignored. Sent while a car waits, on shutdown and when its pose is lost.
+* ``RELEASE`` (0x0004): clears a latched E_STOP (in sequence, from the car process, after
+  the operator released the car). Never together with E_STOP.
+* ``PING`` (0x0008): answer this datagram (:mod:`.answer`) and otherwise ignore it, except
+  that an E_STOP in it still latches. The operator's tools use it to see that a car link
+  answers (``trustfg check``) and that an e-stop latched (``trustfg stop``).
 
 CRC: CRC-32/ISO-HDLC, the one of zlib, Ethernet and PNG -- width 32, polynomial
 0x04C11DB7 (0xEDB88320 bit-reflected), init 0xFFFFFFFF, input and output reflected,
@@ -42,7 +48,8 @@ flags (CRC 0xC0E042BB)::
     00 00 80 3e 00 00 00 bf 00 00 bb 42 e0 c0
 
 A receiver rejects, in this order: wrong length, bad magic, unknown version, bad CRC,
-car id 0, non-finite stamp/v/omega (NaN or infinity), reserved flag bits set. Encoding
+car id 0, non-finite stamp/v/omega (NaN or infinity), reserved flag bits set or E_STOP
+with RELEASE. Encoding
 rounds v and omega to the nearest f32 (a value beyond the f32 range is an error).
 
 What a car does with the commands it decodes is in :mod:`.receiver`.
@@ -86,9 +93,11 @@ class Flags(enum.IntFlag):
     NONE = 0
     E_STOP = 0x0001
     STOP = 0x0002
+    RELEASE = 0x0004
+    PING = 0x0008
 
 
-_KNOWN_FLAGS = int(Flags.E_STOP | Flags.STOP)
+_KNOWN_FLAGS = int(Flags.E_STOP | Flags.STOP | Flags.RELEASE | Flags.PING)
 
 
 @dataclass(frozen=True)
@@ -108,6 +117,8 @@ class Command:
         _check_int("flags", self.flags, 0, 0xFFFF)
         if int(self.flags) & ~_KNOWN_FLAGS:
             raise CarLinkError("flags", f"reserved flag bits set: 0x{int(self.flags):04x}")
+        if int(self.flags) & Flags.E_STOP and int(self.flags) & Flags.RELEASE:
+            raise CarLinkError("flags", "E_STOP and RELEASE together")
         object.__setattr__(self, "flags", Flags(int(self.flags)))
         _check_float("stamp_s", self.stamp_s)
         _check_float("v_mps", self.v_mps, f32=True)
@@ -120,6 +131,14 @@ class Command:
     @property
     def stop(self) -> bool:
         return bool(self.flags & Flags.STOP)
+
+    @property
+    def release(self) -> bool:
+        return bool(self.flags & Flags.RELEASE)
+
+    @property
+    def ping(self) -> bool:
+        return bool(self.flags & Flags.PING)
 
 
 def _check_int(name: str, value: object, low: int, high: int) -> None:

@@ -9,8 +9,15 @@ and stamped. It keeps no schedule of its own: the car process's control loop cal
 sends once rather than catching up in a burst (``fleet/ticker.py``). On shutdown it sends
 a few STOP datagrams, with E_STOP if the last command had it.
 
+The sender also reads, without blocking, the answers a car sends back to its PING
+datagrams (:mod:`.answer`) on the same socket (:meth:`CommandSender.answers`).
+
 Receiver (:class:`CommandReceiver`): a bound UDP socket and a reader thread that feeds
-every datagram to a :class:`~.receiver.CommandFilter` (mocap_sim's simulated cars use it).
+every datagram to a :class:`~.receiver.CommandFilter` and answers PINGs from the same
+socket (mocap_sim's simulated cars use it).
+
+:func:`open_sender` is the one place that turns a car's config into its sender: the car
+process and the operator's tools (``trustfg stop``, ``trustfg check``) all use it.
 """
 
 from __future__ import annotations
@@ -22,7 +29,9 @@ import time
 from dataclasses import dataclass
 from typing import Callable
 
-from .codec import SEQ_MODULUS, Command, Flags, _check_int, encode_command
+from ...agent.config import CarConfig, parse_udp_address
+from .answer import Answer, decode_answer, encode_answer
+from .codec import SEQ_MODULUS, CarLinkError, Command, Flags, _check_int, encode_command
 from .receiver import (
     DEFAULT_RESYNC_AFTER_S,
     DEFAULT_WATCHDOG_TIMEOUT_S,
@@ -42,10 +51,13 @@ Clock = Callable[[], float]
 @dataclass(frozen=True)
 class SenderStats:
     """Counts of a :class:`CommandSender`: ``sent`` datagrams handed to the socket (commands
-    and STOP datagrams alike) and ``send_errors``, datagrams the socket refused."""
+    and STOP datagrams alike), ``send_errors``, datagrams the socket refused, ``answers``
+    received and ``bad_answers`` (invalid, or from another car), dropped."""
 
     sent: int = 0
     send_errors: int = 0
+    answers: int = 0
+    bad_answers: int = 0
 
 
 def _resolve(address: tuple[str, int], passive: bool) -> tuple[socket.AddressFamily, tuple]:
@@ -89,6 +101,8 @@ class CommandSender:
         self._last_flags = Flags.NONE
         self._sent = 0
         self._send_errors = 0
+        self._answers = 0
+        self._bad_answers = 0
 
     def __enter__(self) -> CommandSender:
         return self
@@ -99,7 +113,8 @@ class CommandSender:
     @property
     def stats(self) -> SenderStats:
         with self._lock:
-            return SenderStats(sent=self._sent, send_errors=self._send_errors)
+            return SenderStats(sent=self._sent, send_errors=self._send_errors, answers=self._answers,
+                               bad_answers=self._bad_answers)
 
     def send(self, v_mps: float, omega_radps: float, flags: Flags | int = Flags.NONE) -> Command | None:
         """Send one datagram now, stamped and numbered; the command, or None if the socket failed.
@@ -113,8 +128,9 @@ class CommandSender:
             cmd = Command(self.car_id, self._seq, self._stamp_clock(), v_mps, omega_radps, flags)
             self._seq = (self._seq + 1) % SEQ_MODULUS
             # What the caller asked for, even if the socket fails: stop() keeps an e-stop
-            # whose own datagram was lost.
-            self._last_flags = cmd.flags
+            # whose own datagram was lost. A PING is not a command.
+            if not cmd.ping:
+                self._last_flags = cmd.flags
             try:
                 self._sock.sendto(encode_command(cmd), self._sockaddr)
             except OSError as exc:
@@ -123,6 +139,30 @@ class CommandSender:
                 return None
             self._sent += 1
             return cmd
+
+    def answers(self) -> list[Answer]:
+        """The car's answers to our PINGs that have arrived since the last call (never blocks)."""
+        got = []
+        with self._lock:
+            while self._sock is not None:
+                try:
+                    data = self._sock.recv(_RECV_BUFFER_BYTES, socket.MSG_DONTWAIT)
+                except (BlockingIOError, InterruptedError):
+                    break
+                except OSError as exc:  # e.g. ICMP port unreachable on some systems: nobody answers
+                    log.debug("car %d: reading answers: %s", self.car_id, exc)
+                    break
+                try:
+                    answer = decode_answer(data)
+                except CarLinkError:
+                    self._bad_answers += 1
+                    continue
+                if answer.car_id != self.car_id:
+                    self._bad_answers += 1
+                    continue
+                self._answers += 1
+                got.append(answer)
+        return got
 
     def stop(self) -> None:
         """Send the STOP datagrams (E_STOP kept if the last command had it); a no-op once closed."""
@@ -245,7 +285,7 @@ class CommandReceiver:
 
     def _receive_one(self, sock: socket.socket) -> None:
         try:
-            data, _ = sock.recvfrom(_RECV_BUFFER_BYTES)
+            data, source = sock.recvfrom(_RECV_BUFFER_BYTES)
         except TimeoutError:
             return
         except OSError as exc:
@@ -260,5 +300,18 @@ class CommandReceiver:
             return
         now = self._clock()
         with self._changed:
-            self._filter.accept(data, now)
+            cmd = self._filter.accept(data, now)
+            answer = self._filter.answer(cmd, now) if cmd is not None and cmd.ping else None
             self._changed.notify_all()
+        if answer is not None:
+            try:
+                sock.sendto(encode_answer(answer), source)
+            except OSError as exc:
+                log.debug("car %d: answer to %s failed: %s", self.car_id, source, exc)
+
+
+def open_sender(car: CarConfig, *, stamp_clock: Clock = time.time, **options) -> CommandSender:
+    """The sender for ``car``'s link, as its config asks (``cars[].link``); ConfigError for
+    a bad address. ``options`` go to :class:`CommandSender`."""
+    host, port = parse_udp_address(car.link, f"cars[id={car.id}].link")
+    return CommandSender(car.id, (host, port), stamp_clock=stamp_clock, **options)
