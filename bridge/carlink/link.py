@@ -23,6 +23,7 @@ process and the operator's tools (``trustfg stop``, ``trustfg check``) all use i
 from __future__ import annotations
 
 import logging
+import select
 import socket
 import threading
 import time
@@ -144,11 +145,10 @@ class CommandSender:
         """The car's answers to our PINGs that have arrived since the last call (never blocks)."""
         got = []
         with self._lock:
-            while self._sock is not None:
+            # The socket has a (send) timeout, under which recv would wait: poll first.
+            while self._sock is not None and select.select([self._sock], [], [], 0.0)[0]:
                 try:
-                    data = self._sock.recv(_RECV_BUFFER_BYTES, socket.MSG_DONTWAIT)
-                except (BlockingIOError, InterruptedError):
-                    break
+                    data = self._sock.recv(_RECV_BUFFER_BYTES)
                 except OSError as exc:  # e.g. ICMP port unreachable on some systems: nobody answers
                     log.debug("car %d: reading answers: %s", self.car_id, exc)
                     break

@@ -54,7 +54,7 @@ def test_car_process_stops_without_pose_drives_after_start_and_stops_on_sigterm(
             assert link.last_command.stop
             assert wait_for(lambda: bus.alive.get(car.id), 10.0)
             # After the start it drives: a non-zero speed command.
-            go = messages.StartMessage(1, time.time(), {car.id: (time.time() + 0.2, 0.4)})
+            go = messages.StartMessage(1, time.time(), 1, {car.id: (time.time() + 0.2, 0.4)})
             bus.publish("start", messages.encode(go))
             assert wait_for(lambda: link.last_command and link.last_command.v_mps > 0.05, 10.0)
             # Its own pose lost (tracking invalid): it commands STOP within the pose timeout.
