@@ -15,7 +15,6 @@ misinformation) with and without the transparency factor.
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import functools
 import json
@@ -34,7 +33,7 @@ from ..agent import metrics
 from ..agent.config import Scenario
 from ..agent.scenario_files import load_scenario
 from ..agent.world import build_sdf
-from .command import configured
+from .command import command_parser, configured
 from .fleet_sim import simulate
 from .runs import RunRecord, motion_summary, rounded
 
@@ -295,7 +294,7 @@ class Progress:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="trustfg experiment", description=__doc__.split("\n")[0])
+    parser = command_parser("trustfg experiment", __doc__)
     parser.add_argument("name", choices=[*EXPERIMENTS, "all"])
     parser.add_argument("--seed", type=int, default=0, help="first seed (default 0)")
     parser.add_argument("--seeds", type=int, default=20, help="number of seeds (default 20)")

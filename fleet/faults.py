@@ -33,7 +33,6 @@ Measured per run, from mocap-sim's ground truth and the recorded messages:
 
 from __future__ import annotations
 
-import argparse
 import csv
 import dataclasses
 import json
@@ -48,6 +47,7 @@ from typing import Callable
 
 from ..agent.scenario_files import load_scenario
 from . import netem
+from .command import command_parser
 from .launch import START_LEAD_S, RunContext, free_port, loopback_fleet, run
 
 SCENARIO = "intersection"
@@ -252,10 +252,9 @@ def _interrupt(signum, frame) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="trustfg faults", description=__doc__.split("\n")[0],
-                                     epilog="Needs root: network namespaces and nftables.")
+    parser = command_parser("trustfg faults", __doc__, epilog="Needs root: network namespaces and nftables.")
     parser.add_argument("--seeds", type=int, default=3, help="runs per case (seeds 0..K-1)")
-    parser.add_argument("--cases", nargs="+", choices=list(CASES), default=list(CASES))
+    parser.add_argument("--cases", nargs="+", choices=list(CASES), default=list(CASES), help="the cases to run")
     parser.add_argument("--out", type=Path, default=None, help="folder for the runs (default runs/faults-<time>)")
     args = parser.parse_args(argv)
     reason = netem.available()

@@ -23,7 +23,6 @@ Exit status: 0 when every car arrived with no breach and no process crashed; 1 o
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import csv
 import dataclasses
@@ -45,13 +44,14 @@ from typing import Callable
 import numpy as np
 
 from ..agent import messages
-from ..agent.config import ConfigError, Scenario
+from ..agent.config import ConfigError, Scenario, with_overrides
 from ..agent.scenario_files import dump_scenario, load_scenario
 from ..agent.world import build_sdf
 from ..bridge import natnet
 from .bus import FleetBus
-from .command import configured, stop_on_signals
+from .command import command_parser, configured, stop_on_signals
 from .fleet_sim import draw_departures
+from .operator import OperatorSession
 from .recording import convert_run
 from .runs import RunRecord, arrivals, motion_summary
 
@@ -100,6 +100,13 @@ def loopback_fleet(scenario: Scenario, cars: int | None, liar: int | None, misin
         natnet=dataclasses.replace(scenario.natnet, server=infra_ip, mode="unicast",
                                    command_port=free_port(socket.SOCK_DGRAM), data_port=free_port(socket.SOCK_DGRAM),
                                    local_interface="0.0.0.0"))
+
+
+def with_deadman(scenario: Scenario, deadman_s: float | None) -> Scenario:
+    """The scenario with ``operator.deadman_s`` set (None: as it is)."""
+    if deadman_s is None:
+        return scenario
+    return dataclasses.replace(scenario, operator=with_overrides(scenario.operator, deadman_s=deadman_s))
 
 
 class Processes:
@@ -254,7 +261,7 @@ def run(scenario: Scenario, out: Path, seed: int = 0, timeout_s: float | None = 
                                               "--command-log", str(out / "commands.csv"),
                                               "--seed", str(seed), *mocap_args],
                                 out / "mocap_sim.log", stdout=subprocess.PIPE)
-        _wait_ready(mocap, stop)
+        wait_ready(mocap, stop)
         if dashboard_port is not None:
             port = dashboard_port or free_port()
             processes.start("dashboard", ["dashboard", "--config", str(config_path), "--port", str(port),
@@ -263,27 +270,30 @@ def run(scenario: Scenario, out: Path, seed: int = 0, timeout_s: float | None = 
         for car in scenario.cars:
             processes.start(f"car {car.id}", RunContext(scenario, out, processes, config_path, 0.0).car_args(car.id),
                             out / f"car_{car.id}.log")
-        with FleetBus(scenario.bus, scenario.fleet, None, listen=(observer_endpoint,)) as bus:
+        with FleetBus(scenario.bus, scenario.fleet, None, listen=(observer_endpoint,),
+                      operator_kinds=("start", "stop")) as bus:
             recorder = Recorder(bus, out / "messages.jsonl")
+            operator = OperatorSession(scenario, bus, direct=False)  # the heartbeat, the start
             try:
                 ids = [c.id for c in scenario.cars]
                 print(f"trustfg sim: {len(ids)} cars, waiting for them to come up ...", flush=True)
                 deadline = time.monotonic() + READY_TIMEOUT_S + 5 * len(ids)
                 while not stop.is_set() and not all(bus.alive.get(i) and i in recorder.status for i in ids):
                     recorder.poll()
+                    operator.step()
                     if processes.crashed() or time.monotonic() > deadline:
                         missing = [i for i in ids if not (bus.alive.get(i) and i in recorder.status)]
                         raise RuntimeError(f"cars {missing} did not come up (crashed: {processes.crashed()})")
                     time.sleep(0.05)
                 t_go = time.time() + START_LEAD_S
-                start = messages.StartMessage(1, time.time(), departures(scenario, seed, t_go))
-                bus.publish("start", messages.encode(start))
+                operator.start(departures(scenario, seed, t_go), trial=1)
                 context = RunContext(scenario, out, processes, config_path, t_go, recorder)
                 print(f"trustfg sim: go (seed {seed}); recording to {out}", flush=True)
                 end = time.monotonic() + timeout_s
                 next_report = time.monotonic() + 5.0
                 while not stop.is_set() and time.monotonic() < end:
                     recorder.poll()
+                    operator.step()
                     while pending and time.time() >= t_go + pending[0][0]:
                         t_action, action = pending.pop(0)
                         again = action(context)  # a number: not yet, ask again that much later
@@ -315,18 +325,20 @@ def run(scenario: Scenario, out: Path, seed: int = 0, timeout_s: float | None = 
     return summary
 
 
-def _wait_ready(process: subprocess.Popen, stop: threading.Event) -> None:
+def wait_ready(process: subprocess.Popen, stop: threading.Event) -> None:
+    """Until mocap-sim prints READY (the lines before it -- the ports it bound -- are read
+    from the pipe's file descriptor, so no line waits unseen in a reader's buffer)."""
     deadline = time.monotonic() + READY_TIMEOUT_S
+    fd = process.stdout.fileno()
+    seen = b""
     while not stop.is_set() and time.monotonic() < deadline:
-        readable, _, _ = select.select([process.stdout], [], [], 0.2)
-        if readable:
-            line = process.stdout.readline()
-            if line.strip() == "READY":
-                return
-            if not line and process.poll() is not None:
-                raise RuntimeError(f"mocap-sim exited with {process.returncode} before it was ready")
-        elif process.poll() is not None:
-            raise RuntimeError(f"mocap-sim exited with {process.returncode} before it was ready")
+        readable, _, _ = select.select([fd], [], [], 0.2)
+        chunk = os.read(fd, 4096) if readable else b""
+        seen += chunk
+        if b"READY\n" in seen:
+            return
+        if (readable and not chunk) or (not readable and process.poll() is not None):
+            raise RuntimeError(f"mocap-sim exited with {process.poll()} before it was ready")
     raise RuntimeError("mocap-sim did not become ready")
 
 
@@ -423,7 +435,7 @@ def _port_free(port: int) -> bool:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="trustfg sim", description=__doc__.split("\n")[0])
+    parser = command_parser("trustfg sim", __doc__)
     parser.add_argument("--scenario", default=None,
                         help="a scenario file, or a shipped scene's name (default: intersection, or "
                              "intersection-8 for more than 4 cars)")
@@ -437,6 +449,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="NatNet version mocap-sim streams (default %(default)s)")
     parser.add_argument("--no-dashboard", action="store_true", help="do not start the dashboard")
     parser.add_argument("--dashboard-port", type=int, default=8765, help="dashboard port (0: any free one)")
+    parser.add_argument("--deadman", type=float, default=None,
+                        help="cars stop when the launcher's heartbeat is missing this long, s (default: off)")
     parser.add_argument("--mocap", action="append", default=[], metavar="ARG",
                         help="extra argument for mocap-sim, e.g. --mocap=--drop-rate=0.3 (repeatable)")
     args = parser.parse_args(argv)
@@ -444,8 +458,9 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("--cars must be at least 1")
     if not 0.0 <= args.misinformation <= 1.0:
         parser.error("--misinformation must be within [0, 1]")
-    fleet = configured("trustfg sim", lambda: loopback_fleet(
-        load_scenario(args.scenario or default_scenario(args.cars)), args.cars, args.liar, args.misinformation))
+    fleet = configured("trustfg sim", lambda: with_deadman(loopback_fleet(
+        load_scenario(args.scenario or default_scenario(args.cars)), args.cars, args.liar, args.misinformation),
+        args.deadman))
     out = args.out or Path("runs") / time.strftime("sim-%Y%m%d-%H%M%S")
     stop = stop_on_signals(threading.Event())
     try:

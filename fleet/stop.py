@@ -1,0 +1,149 @@
+"""``trustfg stop --config FILE [--cars N ...]``: the emergency stop of a fleet, or of some cars.
+
+An e-stop goes two independent ways at once: E_STOP datagrams straight to each named car's
+link (no car process needed: the car latches it whatever else it hears) and a stop message
+on the bus, which every car process applies (it sends E_STOP itself and ends its trial).
+A car stays stopped until the operator releases it (``--release``: on the bus; each car
+process then sends RELEASE in its own sequence, and the car waits for a new start).
+``--abort`` ends the running trial instead: the cars hold still (STOP, not latched) and
+wait for the next start.
+
+It prints, per car, what each path confirmed -- the car process's status on the bus, the
+car's own answer on its link -- and exits with 1 when a named car confirmed on neither.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+
+from ..agent.scenario_files import load_scenario
+from .command import command_parser, configured
+from .link_stop import DIRECT_PERIOD_S, DIRECT_REPEAT_S, LinkStopper, named
+
+CONFIRMED = {"estop": lambda state: state == "e_stopped", "release": lambda state: state not in ("e_stopped", ""),
+             "abort": lambda state: state not in ("driving", "stuck", "")}
+
+
+def main(argv: list[str] | None = None) -> int:
+    issued = time.time()  # the command, as the operator gave it
+    parser = command_parser("trustfg stop", __doc__)
+    parser.add_argument("--config", required=True, help="fleet config: a TOML file or a shipped name (lab/fleet)")
+    parser.add_argument("--cars", type=int, nargs="+", default=[], help="the cars to stop (default: every car)")
+    what = parser.add_mutually_exclusive_group()
+    what.add_argument("--release", action="store_true", help="release an e-stop (on the bus)")
+    what.add_argument("--abort", action="store_true", help="end the running trial: cars hold and wait")
+    parser.add_argument("--trial", type=int, default=0, help="with --abort: only this trial (0: whichever runs)")
+    parser.add_argument("--path", choices=("both", "bus", "link"), default="both",
+                        help="which way an e-stop goes")
+    parser.add_argument("--repeat", type=float, default=DIRECT_REPEAT_S,
+                        help="seconds the E_STOP datagrams are repeated on the links")
+    parser.add_argument("--wait", type=float, default=2.0, help="seconds to wait for the cars to confirm")
+    parser.add_argument("--listen", action="append", default=[], help="Zenoh endpoint to listen on (repeatable)")
+    args = parser.parse_args(argv)
+    action = "release" if args.release else "abort" if args.abort else "estop"
+    if action != "estop" and args.path == "link":
+        parser.error(f"a {action} goes on the bus only (--path bus or both)")
+    if not (args.repeat >= 0 and args.wait >= 0):
+        parser.error("--repeat and --wait must be >= 0")
+    fleet = configured("trustfg stop", lambda: load_scenario(args.config))
+    try:
+        cars = named(fleet, args.cars)
+    except ValueError as exc:
+        parser.error(str(exc))
+    stopper = None
+    if action == "estop" and args.path != "bus":
+        stopper = LinkStopper(fleet)  # the direct path first: no Zenoh, no numpy before it
+        stopper.engage(cars, time.time(), args.repeat)
+        sent_direct = time.time()
+    else:
+        stopper = LinkStopper(fleet) if action == "release" else None  # to see the latch go
+        sent_direct = None
+    try:
+        return _on_the_bus(fleet, cars, action, args, stopper, issued, sent_direct)
+    finally:
+        if stopper is not None:
+            stopper.close()
+
+
+def _on_the_bus(fleet, cars, action, args, stopper, issued, sent_direct) -> int:
+    from ..agent import messages  # imported after the direct path went out
+    from .bus import BusError, FleetBus
+    from .operator import OperatorSession
+
+    bus = None
+    session = None
+    seen = {car: "" for car in cars}
+    try:
+        if args.path != "link":
+            bus = FleetBus(fleet.bus, fleet.fleet, None, listen=tuple(args.listen), operator_kinds=())
+            bus.open()
+            session = OperatorSession(fleet, bus, direct=False)
+            {"estop": session.estop, "release": session.release,
+             "abort": lambda cars: session.abort(cars, args.trial)}[action](args.cars)
+        published = time.time()
+        inbox = messages.Inbox()
+        deadline = time.monotonic() + max(args.wait, args.repeat)
+        next_ping = 0.0
+        while time.monotonic() < deadline:
+            now = time.time()
+            if stopper is not None:
+                if action == "release" and time.monotonic() >= next_ping:
+                    next_ping = time.monotonic() + 0.1
+                    stopper.ping(cars)
+                stopper.step(now)
+            if bus is not None:
+                for received in bus.drain():
+                    message = inbox.accept(received.payload, key_sender=received.sender)
+                    if isinstance(message, messages.StatusMessage) and message.sender in seen \
+                            and received.at >= published:
+                        seen[message.sender] = message.state
+            on_bus = bus is None or all(CONFIRMED[action](seen[car]) for car in cars)
+            if on_bus and all(_confirmed(action, seen[car], stopper, car) for car in cars) \
+                    and not (stopper and stopper.busy):
+                break  # every car confirmed (on the bus, when it is asked); else until --wait
+            time.sleep(DIRECT_PERIOD_S)
+    except BusError as exc:
+        print(f"trustfg stop: the bus: {exc}", file=sys.stderr)
+        if stopper is None or action != "estop":
+            return 1
+    finally:
+        if session is not None:
+            session.close()
+        if bus is not None:
+            bus.close()
+    return _report(fleet, cars, action, seen, stopper, issued, sent_direct)
+
+
+def _latched(stopper, car: int) -> bool | None:
+    answer = stopper.answers.get(car) if stopper is not None else None
+    return None if answer is None else answer.e_stop_latched
+
+
+def _confirmed(action: str, state: str, stopper, car: int) -> bool:
+    latched = _latched(stopper, car)
+    if action == "estop":
+        return CONFIRMED[action](state) or latched is True
+    if action == "release":
+        return CONFIRMED[action](state) and latched is not True
+    return CONFIRMED[action](state)
+
+
+def _report(fleet, cars, action, seen, stopper, issued, sent_direct) -> int:
+    if sent_direct is not None:
+        print(f"E_STOP sent straight to the links of cars {' '.join(map(str, cars))} "
+              f"{(sent_direct - issued) * 1e3:.0f} ms after the command")
+    print(f"{'car':>4}  {'bus (car process)':<20} {'link (the car)':<20}")
+    failed = []
+    for car in cars:
+        state = seen[car] or "no answer"
+        latched = _latched(stopper, car)
+        link = "-" if stopper is None else {True: "e-stop latched", False: "not latched",
+                                            None: "no answer"}[latched]
+        print(f"{car:>4}  {state:<20} {link:<20}")
+        if not _confirmed(action, seen[car], stopper, car):
+            failed.append(car)
+    if failed:
+        print(f"trustfg stop: not confirmed by cars {' '.join(map(str, failed))}", file=sys.stderr)
+        return 1
+    return 0
