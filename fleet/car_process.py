@@ -101,6 +101,7 @@ class CarProcess:
         self._car_latched = False
         self._waiting = WaitingLog(car.id)
         self._plan = None  # what the control thread follows (swapped atomically)
+        self._last_plans: dict[int, tuple[messages.PlanMessage, float]] = {}
         self._bodies = {c.body_id: c.id for c in scenario.cars}
         self._seq: Counter = Counter()
         self._alive: dict[int, bool] = {}
@@ -150,6 +151,8 @@ class CarProcess:
                 log.warning("car %d: %s", self.car.id, self.operation.reason)
         elif isinstance(message, (messages.PlanMessage, messages.TrustReport)):
             self.agent.receive(message, received.at)
+            if isinstance(message, messages.PlanMessage):
+                self._last_plans[message.sender] = (message, received.at)  # for the next trial's agent
 
     def _start(self, message: messages.StartMessage | None) -> None:
         """A start from the operator (None: ``control.start_timeout_s`` ran out)."""
@@ -169,6 +172,8 @@ class CarProcess:
             self._plan = None
             agent = self._new_agent()
             agent.set_departure(depart, cruise)
+            for plan, at in self._last_plans.values():  # what the peers intend, as last heard
+                agent.receive(plan, at)
             self.agent = agent
             self.stuck = False
             self._motion.clear()
