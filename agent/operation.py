@@ -29,8 +29,11 @@ Rules that keep a car from driving off by itself:
 * An e-stop aborts the trial; a release never resumes one (the car waits for a new start).
 * Deadman (``operator.deadman_s`` > 0): a driving car whose operator has not been heard
   for longer than that ends its trial and waits.
-* After a release the car's datagrams carry RELEASE for ``operator.release_datagrams``
-  ticks (the car's latch needs an in-sequence RELEASE: bridge.carlink.receiver, rule 7).
+* After a release the car's datagrams carry RELEASE for ``operator.release_s`` while it
+  waits (the car's latch needs an in-sequence RELEASE: bridge.carlink.receiver, rule 7;
+  and an operator's e-stop repeats, still in flight, must not latch it again). Never
+  while it drives: a start ends the RELEASEs, so an e-stop sent straight to the car
+  during a trial always holds.
   A car that reports its latch on (an e-stop the operator sent straight to it, or one
   from before this process started) makes the car e-stopped here too, so the process
   says so and waits for the release.
@@ -46,8 +49,8 @@ from .config import OperatorConfig
 from .messages import StartMessage, StopMessage
 
 LATCH_REPORT_GRACE_S = 0.5
-"""After the last RELEASE datagram, answers that still report the latch are in flight
-from before it (ignored for this long)."""
+"""After the last RELEASE datagram, answers that still report the latch may be from
+before it (ignored for this long)."""
 
 
 class Mode(str, enum.Enum):
@@ -80,8 +83,7 @@ class Operation:
         """When the operator's heartbeat last arrived (fleet clock)."""
         self.reason = "waiting for the operator's start"
         """Why the mode is what it is, in words (logs, status)."""
-        self._release_left = 0
-        self._released_at = -math.inf
+        self._release_until = -math.inf
         self._unheard_start: StartMessage | None = None
 
     # --- what the operator says -----------------------------------------------------------
@@ -108,6 +110,7 @@ class Operation:
             return False
         self.mode, self.trial = Mode.DRIVING, message.trial
         self.depart_at, self.cruise_mps = depart, cruise
+        self._release_until = min(self._release_until, now)
         self.reason = f"trial {message.trial}: departs in {depart - now:.1f} s"
         return True
 
@@ -124,12 +127,12 @@ class Operation:
         before = self.mode
         if message.action == "estop":
             self.mode, self.depart_at = Mode.E_STOPPED, math.inf
-            self._release_left = 0
+            self._release_until = min(self._release_until, now)
             self.reason = "e-stopped by the operator"
         elif message.action == "release":
             # The car may be latched by an e-stop we never heard of (sent straight to it):
             # release it in any mode, and never resume a trial.
-            self._release_left = self.config.release_datagrams
+            self._release_until = now + self.config.release_s
             if self.mode in (Mode.E_STOPPED, Mode.DRIVING):
                 self.mode, self.depart_at = Mode.WAITING, math.inf
                 self.reason = "released by the operator: waiting for a start"
@@ -165,8 +168,7 @@ class Operation:
 
     def car_reports_latch(self, latched: bool, now: float) -> bool:
         """The car's answer says whether its e-stop is latched; whether the mode changed."""
-        if (not latched or self.mode == Mode.E_STOPPED or self._release_left
-                or now - self._released_at < LATCH_REPORT_GRACE_S):
+        if not latched or self.mode == Mode.E_STOPPED or now < self._release_until + LATCH_REPORT_GRACE_S:
             return False
         self.mode, self.depart_at = Mode.E_STOPPED, math.inf
         self.reason = "the car reports its e-stop latched: waiting for the operator's release"
@@ -178,11 +180,9 @@ class Operation:
         return self.mode == Mode.DRIVING and now >= self.depart_at and self.hears_operator(now)
 
     def next_flags(self, now: float) -> LinkFlags:
-        """Flags of the next datagram (counts a RELEASE as sent)."""
+        """Flags of the next datagram."""
         if self.mode == Mode.E_STOPPED:
             return LinkFlags(e_stop=True)
-        if self._release_left:
-            self._release_left -= 1
-            self._released_at = now
+        if now < self._release_until and self.mode != Mode.DRIVING:
             return LinkFlags(release=True)
         return LinkFlags()

@@ -55,6 +55,12 @@ class LinkStopper:
                 self._until[car] = now + repeat_s
                 self.senders[car].send(0.0, 0.0, Flags.E_STOP | Flags.STOP | Flags.PING)
 
+    def cancel(self, cars: Iterable[int]) -> None:
+        """Stop repeating the e-stop to the named cars (the operator released them: a
+        repeat arriving after their RELEASE would latch them again)."""
+        for car in cars:
+            self._until.pop(car, None)
+
     def ping(self, cars: Iterable[int]) -> None:
         """Ask the named cars for their state (a PING is never applied)."""
         for car in cars:

@@ -12,7 +12,10 @@ Every operator's session (``trustfg go``, the dashboard in operator mode, the la
   the status messages its owner hands it (:meth:`OperatorSession.heard`).
 
 A release goes on the bus only: a car's latch is cleared by its own car process's
-in-sequence RELEASE (the operator's datagrams are out of that sequence by design).
+in-sequence RELEASE (the operator's datagrams are out of that sequence by design). A
+release ends this session's e-stop repeats first; one from another session that is still
+repeating its e-stop (``DIRECT_REPEAT_S`` after it) latches the car again: the car then
+stays stopped, its process says so, and the operator releases once more.
 """
 
 from __future__ import annotations
@@ -100,6 +103,10 @@ class OperatorSession:
         self._publish_stop("estop", cars, now)
 
     def release(self, cars: Iterable[int] = ()) -> None:
+        """Release on the bus (each car process sends RELEASE in its own sequence); this
+        session's e-stop repeats to those cars end first."""
+        if self.stopper is not None:
+            self.stopper.cancel(named(self.fleet, cars))
         self._publish_stop("release", cars, self.clock())
 
     def abort(self, cars: Iterable[int] = (), trial: int = 0) -> None:

@@ -10,7 +10,7 @@ thread keeps going (``heartbeat`` switches the heartbeat off and on). Unlike
 
 What the cars apply comes from mocap-sim's command log (every change of a car's command
 between zero and non-zero, on the fleet clock, at physics resolution):
-:meth:`LoopbackFleet.zero_at` says when every named car applied zero after a moment.
+:meth:`LoopbackFleet.held_since` says since when each car has applied zero for good.
 """
 
 from __future__ import annotations
@@ -168,13 +168,15 @@ class LoopbackFleet:
                 last[car] = bool(v or omega)
         return {car for car, on in last.items() if on}
 
-    def zero_at(self, since: float, cars: set[int]) -> dict[int, float | None]:
-        """When each car (moving at ``since``) first applied zero after ``since`` (None: not yet)."""
-        out: dict[int, float | None] = {car: None for car in cars}
+    def held_since(self, since: float, cars: set[int] | list[int]) -> dict[int, float | None]:
+        """For each car, since when it has applied zero for good, counted from ``since``:
+        the last change to zero after ``since`` (``since`` itself if it was at zero then
+        and never moved after); None while it still moves."""
+        state = {car: (False, since) for car in cars}  # (moving, since when)
         for t, car, v, omega in self.commands():
-            if car in out and out[car] is None and t >= since and not (v or omega):
-                out[car] = t
-        return out
+            if car in state and (t <= since or (v or omega) != state[car][0]):
+                state[car] = (bool(v or omega), max(t, since))
+        return {car: None if on else at for car, (on, at) in state.items()}
 
     def moved_after(self, since: float) -> set[int]:
         """Cars that applied a non-zero command at any moment after ``since``."""

@@ -121,9 +121,11 @@ class OperatorConfig:
     """A car process that comes up after its departure time (restarted by its supervisor)
     joins the running trial from the operator's cached start. False: it waits for the
     operator to start it again."""
-    release_datagrams: int = 10
-    """How many consecutive command datagrams carry RELEASE after the operator releases
-    an e-stop (at 50 Hz: 0.2 s, so that losing a few does not keep the car latched)."""
+    release_s: float = 0.8
+    """How long a car process's datagrams carry RELEASE after the operator released it
+    (while it waits): longer than an operator's e-stop repeats on the link (0.5 s,
+    fleet.link_stop), so a repeat still in flight cannot latch the car again, and enough
+    datagrams (40 at 50 Hz) that losing some does not matter."""
     clock_tolerance_s: float = 0.02
     """``trustfg check`` warns when a car computer's clock is further than this from the
     operator's (plans and departures carry absolute times)."""
@@ -136,8 +138,8 @@ class OperatorConfig:
         if self.deadman_s and self.deadman_s < 2 * self.heartbeat_period_s:
             raise ConfigError(f"{path}.deadman_s: must be at least twice heartbeat_period_s "
                               f"({self.heartbeat_period_s} s), or 0")
-        if not 1 <= self.release_datagrams <= 1000:
-            raise ConfigError(f"{path}.release_datagrams: must be within 1..1000")
+        if not 0.1 <= self.release_s <= 10.0:
+            raise ConfigError(f"{path}.release_s: must be within [0.1, 10] s")
 
 
 @dataclass(frozen=True)

@@ -74,10 +74,19 @@ def test_e_stop_latches_every_datagram_until_released_and_release_never_resumes(
     op.take_stop(stop("release", cars=(1,)), 13.0)  # another car's release
     assert op.mode == Mode.E_STOPPED
     assert op.take_stop(stop("release"), 13.0) and op.mode == Mode.WAITING
-    flags = [op.next_flags(13.0 + 0.02 * k) for k in range(15)]
-    assert [f.release for f in flags] == [True] * 10 + [False] * 5
+    flags = [op.next_flags(13.0 + 0.02 * k) for k in range(50)]
+    assert [f.release for f in flags] == [True] * 40 + [False] * 10  # release_s = 0.8
     assert not any(f.e_stop for f in flags)
     assert not op.may_drive(20.0)  # waits for a new start
+
+
+def test_no_release_while_driving_so_a_direct_e_stop_holds():
+    op = Operation(CAR, OperatorConfig())
+    op.take_stop(stop("release"), 1.0)
+    assert op.next_flags(1.02).release
+    op.heard_operator(1.05)
+    assert op.take_start(start(1, 2.0), 1.1)
+    assert not any(op.next_flags(1.1 + 0.02 * k).release for k in range(50))
 
 
 def test_a_release_also_releases_a_latch_it_never_heard_of_and_ends_the_trial():
@@ -104,11 +113,11 @@ def test_a_latched_car_makes_the_process_e_stopped_but_not_just_after_a_release(
     assert not op.car_reports_latch(False, 0.0)
     assert op.car_reports_latch(True, 0.0) and op.mode == Mode.E_STOPPED
     op.take_stop(stop("release"), 1.0)
-    for k in range(10):  # answers from before the RELEASE got through
+    for k in range(40):  # answers from before the RELEASE got through
         op.next_flags(1.0 + 0.02 * k)
         assert not op.car_reports_latch(True, 1.0 + 0.02 * k)
-    assert not op.car_reports_latch(True, 1.18 + LATCH_REPORT_GRACE_S - 0.01)
-    assert op.car_reports_latch(True, 1.18 + LATCH_REPORT_GRACE_S + 0.01)  # still latched: say so
+    assert not op.car_reports_latch(True, 1.8 + LATCH_REPORT_GRACE_S - 0.01)
+    assert op.car_reports_latch(True, 1.8 + LATCH_REPORT_GRACE_S + 0.01)  # still latched: say so
 
 
 def test_start_timeout_drives_without_the_operator():
@@ -118,7 +127,7 @@ def test_start_timeout_drives_without_the_operator():
 
 
 @pytest.mark.parametrize("field, value", [("deadman_s", -1.0), ("deadman_s", 0.1), ("heartbeat_period_s", 0.0),
-                                          ("release_datagrams", 0), ("clock_tolerance_s", 0.0)])
+                                          ("release_s", 0.0), ("clock_tolerance_s", 0.0)])
 def test_operator_config_is_checked(field, value):
     from trustfg.agent.config import ConfigError
     with pytest.raises(ConfigError, match=field):
