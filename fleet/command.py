@@ -33,12 +33,19 @@ class _HelpWithDefaults(argparse.RawDescriptionHelpFormatter):
         return f"{text} (default: %(default)s)"
 
 
+class _OneLineErrors(argparse.ArgumentParser):
+    """A usage error is one line on stderr and exit status 2."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: {message} (see --help)\n")
+
+
 def command_parser(prog: str, doc: str | None, whole: bool = False, **kwargs) -> argparse.ArgumentParser:
     """An argument parser for ``trustfg COMMAND``: the description is the first paragraph
     of the command module's docstring (``whole``: all of it), never cut mid-sentence; the
-    help shows every default."""
+    help shows every default; a usage error is one line."""
     description = (doc or "").strip() if whole else (doc or "").strip().split("\n\n")[0]
-    return argparse.ArgumentParser(prog=prog, description=description, formatter_class=_HelpWithDefaults, **kwargs)
+    return _OneLineErrors(prog=prog, description=description, formatter_class=_HelpWithDefaults, **kwargs)
 
 
 def stop_on_signals(stop: threading.Event) -> threading.Event:

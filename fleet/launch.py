@@ -44,7 +44,7 @@ from typing import Callable
 import numpy as np
 
 from ..agent import messages
-from ..agent.config import ConfigError, Scenario, with_overrides
+from ..agent.config import ConfigError, Scenario
 from ..agent.scenario_files import dump_scenario, load_scenario
 from ..agent.world import build_sdf
 from ..bridge import natnet
@@ -106,7 +106,9 @@ def with_deadman(scenario: Scenario, deadman_s: float | None) -> Scenario:
     """The scenario with ``operator.deadman_s`` set (None: as it is)."""
     if deadman_s is None:
         return scenario
-    return dataclasses.replace(scenario, operator=with_overrides(scenario.operator, deadman_s=deadman_s))
+    operator = dataclasses.replace(scenario.operator, deadman_s=deadman_s)
+    operator.validate("operator")
+    return dataclasses.replace(scenario, operator=operator)
 
 
 class Processes:
