@@ -23,14 +23,10 @@ Exit status: 0 when every car arrived with no breach and no process crashed; 1 o
 
 from __future__ import annotations
 
-import contextlib
 import csv
 import dataclasses
 import json
 import logging
-import os
-import select
-import signal
 import socket
 import subprocess
 import sys
@@ -52,13 +48,12 @@ from .bus import FleetBus
 from .command import command_parser, configured, stop_on_signals
 from .fleet_sim import draw_departures
 from .operator import OperatorSession
+from .processes import READY_TIMEOUT_S, Processes, wait_ready
 from .recording import convert_run
 from .runs import RunRecord, arrivals, motion_summary
 
 log = logging.getLogger(__name__)
 
-READY_TIMEOUT_S = 30.0
-GRACE_S = 5.0
 START_LEAD_S = 1.0
 
 
@@ -109,60 +104,6 @@ def with_deadman(scenario: Scenario, deadman_s: float | None) -> Scenario:
     operator = dataclasses.replace(scenario.operator, deadman_s=deadman_s)
     operator.validate("operator")
     return dataclasses.replace(scenario, operator=operator)
-
-
-class Processes:
-    """Child processes, each in its own session; stopped for sure on exit."""
-
-    def __init__(self, wrap: Callable[[str, list[str]], list[str]] | None = None) -> None:
-        self.children: dict[str, subprocess.Popen] = {}
-        self.killed: set[str] = set()
-        self.wrap = wrap or (lambda name, argv: argv)
-
-    def start(self, name: str, args: list[str], log_path: Path, stdout=None) -> subprocess.Popen:
-        log_file = open(log_path, "a")
-        argv = self.wrap(name, [sys.executable, "-m", "trustfg", *args])
-        process = subprocess.Popen(argv, stdout=stdout or log_file, stderr=log_file, start_new_session=True, text=True)
-        log_file.close()
-        self.children[name] = process
-        return process
-
-    def stop(self, names: list[str] | None = None) -> None:
-        names = list(self.children) if names is None else names
-        for name in names:
-            process = self.children[name]
-            if process.poll() is None:
-                try:
-                    os.killpg(process.pid, signal.SIGTERM)
-                except ProcessLookupError:
-                    pass
-        deadline = time.monotonic() + GRACE_S
-        for name in names:
-            process = self.children[name]
-            try:
-                process.wait(timeout=max(0.1, deadline - time.monotonic()))
-            except subprocess.TimeoutExpired:
-                log.warning("%s did not stop within %.0f s; killing it", name, GRACE_S)
-                try:
-                    os.killpg(process.pid, signal.SIGKILL)
-                except ProcessLookupError:
-                    pass
-                process.wait(timeout=5)
-            if process.stdout:
-                process.stdout.close()
-
-    def kill(self, name: str) -> None:
-        """SIGKILL a child (a fault to inject): it is not counted as crashed."""
-        self.killed.add(name)
-        process = self.children[name]
-        with contextlib.suppress(ProcessLookupError):
-            os.killpg(process.pid, signal.SIGKILL)
-        process.wait(timeout=5)
-
-    def crashed(self) -> list[str]:
-        """Children that exited on their own with an error (before we stopped them)."""
-        return [name for name, p in self.children.items()
-                if p.poll() not in (None, 0) and not (name in self.killed and p.returncode == -signal.SIGKILL)]
 
 
 class Recorder:
@@ -239,12 +180,14 @@ class RunContext:
 def run(scenario: Scenario, out: Path, seed: int = 0, timeout_s: float | None = None,
         natnet_version: str = natnet.DEFAULT_STREAM_VERSION, mocap_args: tuple[str, ...] = (), stop: threading.Event | None = None,
         dashboard_port: int | None = None, wrap: Callable[[str, list[str]], list[str]] | None = None,
-        schedule: list[tuple[float, Callable[[RunContext], None]]] = (), infra_ip: str = "127.0.0.1") -> dict:
+        schedule: list[tuple[float, Callable[[RunContext], None]]] = (), infra_ip: str = "127.0.0.1",
+        stay: bool = False) -> dict:
     """Run the fleet to completion; returns the summary (also written to out/summary.json).
 
     ``dashboard_port``: also start ``trustfg dashboard`` there (0: any free port).
     ``wrap(name, argv)``: how to start each child (e.g. inside a network namespace).
-    ``schedule``: (seconds after the go, action) -- faults injected during the run."""
+    ``schedule``: (seconds after the go, action) -- faults injected during the run.
+    ``stay``: run until the timeout even when every car has arrived (further trials)."""
     stop = stop or threading.Event()
     out.mkdir(parents=True, exist_ok=True)
     config_path = out / "fleet.toml"
@@ -303,7 +246,7 @@ def run(scenario: Scenario, out: Path, seed: int = 0, timeout_s: float | None = 
                             pending.append((time.time() - t_go + float(again), action))
                             pending.sort(key=lambda item: item[0])
                     arrived = [i for i in ids if recorder.status.get(i) and recorder.status[i].at_goal]
-                    if len(arrived) == len(ids) and not pending:
+                    if len(arrived) == len(ids) and not pending and not stay:
                         break
                     if time.monotonic() > next_report:
                         next_report += 5.0
@@ -325,23 +268,6 @@ def run(scenario: Scenario, out: Path, seed: int = 0, timeout_s: float | None = 
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
     summary["recording"] = str(convert_run(out, scenario))
     return summary
-
-
-def wait_ready(process: subprocess.Popen, stop: threading.Event) -> None:
-    """Until mocap-sim prints READY (the lines before it -- the ports it bound -- are read
-    from the pipe's file descriptor, so no line waits unseen in a reader's buffer)."""
-    deadline = time.monotonic() + READY_TIMEOUT_S
-    fd = process.stdout.fileno()
-    seen = b""
-    while not stop.is_set() and time.monotonic() < deadline:
-        readable, _, _ = select.select([fd], [], [], 0.2)
-        chunk = os.read(fd, 4096) if readable else b""
-        seen += chunk
-        if b"READY\n" in seen:
-            return
-        if (readable and not chunk) or (not readable and process.poll() is not None):
-            raise RuntimeError(f"mocap-sim exited with {process.poll()} before it was ready")
-    raise RuntimeError("mocap-sim did not become ready")
 
 
 def read_ground_truth(path: Path, ids: list[int]) -> tuple[np.ndarray, np.ndarray]:
@@ -451,6 +377,9 @@ def main(argv: list[str] | None = None) -> int:
                         help="NatNet version mocap-sim streams (default %(default)s)")
     parser.add_argument("--no-dashboard", action="store_true", help="do not start the dashboard")
     parser.add_argument("--dashboard-port", type=int, default=8765, help="dashboard port (0: any free one)")
+    parser.add_argument("--stay", action="store_true",
+                        help="keep the fleet up after the cars arrive, until --timeout or Ctrl-C (more trials: "
+                             "trustfg go, trustfg stop)")
     parser.add_argument("--deadman", type=float, default=None,
                         help="cars stop when the launcher's heartbeat is missing this long, s (default: off)")
     parser.add_argument("--mocap", action="append", default=[], metavar="ARG",
@@ -467,7 +396,8 @@ def main(argv: list[str] | None = None) -> int:
     stop = stop_on_signals(threading.Event())
     try:
         port = None if args.no_dashboard else (args.dashboard_port if _port_free(args.dashboard_port) else 0)
-        summary = run(fleet, out, args.seed, args.timeout, args.natnet_version, tuple(args.mocap), stop, port)
+        summary = run(fleet, out, args.seed, args.timeout, args.natnet_version, tuple(args.mocap), stop, port,
+                      stay=args.stay)
     except RuntimeError as exc:
         print(f"trustfg sim: {exc} (logs in {out})", file=sys.stderr)
         return 1

@@ -10,7 +10,7 @@ thread keeps going (``heartbeat`` switches the heartbeat off and on). Unlike
 
 What the cars apply comes from mocap-sim's command log (every change of a car's command
 between zero and non-zero, on the fleet clock, at physics resolution):
-:meth:`LoopbackFleet.held_since` says since when each car has applied zero for good.
+:meth:`CommandLog.held_since` says since when each car has applied zero for good.
 """
 
 from __future__ import annotations
@@ -29,8 +29,9 @@ from ..agent import messages
 from ..agent.config import Scenario
 from ..agent.scenario_files import dump_scenario
 from .bus import FleetBus
-from .launch import Processes, free_port, loopback_fleet, wait_ready, with_deadman
+from .launch import free_port, loopback_fleet, with_deadman
 from .operator import OperatorSession
+from .processes import Processes, wait_ready
 
 
 class LoopbackFleet:
@@ -40,6 +41,7 @@ class LoopbackFleet:
         self.out = out
         self.config = out / "fleet.toml"
         self.command_log = out / "commands.csv"
+        self.log = CommandLog(self.command_log)
         self.control_port = free_port(socket.SOCK_DGRAM)
         self.mocap_args = mocap_args
         self.cars_first = cars_first
@@ -151,13 +153,36 @@ class LoopbackFleet:
         return False
 
     def commands(self) -> list[tuple[float, int, float, float]]:
-        """mocap-sim's command log: (t, car, v, omega) at every change between zero and not."""
+        return self.log.commands()
+
+    def moving(self, at: float | None = None) -> set[int]:
+        return self.log.moving(at)
+
+    def held_since(self, since: float, cars) -> dict[int, float | None]:
+        return self.log.held_since(since, cars)
+
+    def moved_after(self, since: float) -> set[int]:
+        return self.log.moved_after(since)
+
+class CommandLog:
+    """mocap-sim's command log (``--command-log``): every change of a car's applied command
+    between zero and non-zero, (t, car, v, omega) on the fleet clock."""
+
+    def __init__(self, path: Path):
+        self.path = path
+
+    def commands(self) -> list[tuple[float, int, float, float]]:
+        rows = []
         try:
-            with open(self.command_log, newline="") as f:
-                return [(float(r["t"]), int(r["car_id"]), float(r["v_cmd"]), float(r["omega_cmd"]))
-                        for r in csv.DictReader(f)]
-        except (OSError, ValueError, KeyError):
-            return []
+            with open(self.path, newline="") as f:
+                for r in csv.DictReader(f):
+                    try:
+                        rows.append((float(r["t"]), int(r["car_id"]), float(r["v_cmd"]), float(r["omega_cmd"])))
+                    except (TypeError, ValueError):  # a line being written
+                        continue
+        except OSError:
+            pass
+        return rows
 
     def moving(self, at: float | None = None) -> set[int]:
         """Cars applying a non-zero command at ``at`` (default: now), per the command log."""
