@@ -36,16 +36,14 @@ from __future__ import annotations
 
 import enum
 import struct
-import zlib
 from dataclasses import dataclass
 
-from .codec import CarLinkError, _check_int
+from .codec import CarLinkError, _check_int, open_frame, seal
 
 ANSWER_MAGIC = b"TA"
 ANSWER_VERSION = 1
 ANSWER_SIZE = 22
 _BODY = struct.Struct("<2sBBIdH")
-_CRC = struct.Struct("<I")
 
 
 class CarState(enum.IntFlag):
@@ -81,25 +79,12 @@ class Answer:
 
 
 def encode_answer(answer: Answer) -> bytes:
-    body = _BODY.pack(ANSWER_MAGIC, ANSWER_VERSION, answer.car_id, answer.seq, answer.stamp_s, int(answer.state))
-    return body + _CRC.pack(zlib.crc32(body))
+    return seal(_BODY.pack(ANSWER_MAGIC, ANSWER_VERSION, answer.car_id, answer.seq, answer.stamp_s, int(answer.state)))
 
 
 def decode_answer(data: bytes | bytearray | memoryview) -> Answer:
     """The answer in a datagram; raises :class:`CarLinkError` (and nothing else) if invalid."""
-    if not isinstance(data, (bytes, bytearray, memoryview)):
-        raise CarLinkError("type", f"expected bytes, got {type(data).__name__}")
-    data = bytes(data)
-    if len(data) != ANSWER_SIZE:
-        raise CarLinkError("length", f"{len(data)} bytes, expected {ANSWER_SIZE}")
-    magic, version, car_id, seq, stamp_s, state = _BODY.unpack_from(data)
-    if magic != ANSWER_MAGIC:
-        raise CarLinkError("magic", f"magic {magic!r}, expected {ANSWER_MAGIC!r}")
-    if version != ANSWER_VERSION:
-        raise CarLinkError("version", f"answer version {version}, this end speaks {ANSWER_VERSION}")
-    (crc,) = _CRC.unpack_from(data, _BODY.size)
-    if crc != zlib.crc32(data[:_BODY.size]):
-        raise CarLinkError("crc", "answer checksum mismatch")
+    _, _, car_id, seq, stamp_s, state = open_frame(data, _BODY, ANSWER_MAGIC, ANSWER_VERSION)
     if state & ~int(CarState.E_STOP_LATCHED | CarState.STOPPED):
         raise CarLinkError("flags", f"reserved state bits set: 0x{state:04x}")
     return Answer(car_id, seq, stamp_s, CarState(state))

@@ -167,28 +167,40 @@ def _check_float(name: str, value: object, f32: bool = False) -> None:
 
 def encode_command(cmd: Command) -> bytes:
     """The 30-byte datagram of ``cmd`` (v and omega rounded to f32)."""
-    body = _BODY.pack(MAGIC, VERSION, cmd.car_id, cmd.seq, cmd.stamp_s, cmd.v_mps,
-                      cmd.omega_radps, int(cmd.flags))
-    return body + _CRC.pack(zlib.crc32(body))
+    return seal(_BODY.pack(MAGIC, VERSION, cmd.car_id, cmd.seq, cmd.stamp_s, cmd.v_mps,
+                           cmd.omega_radps, int(cmd.flags)))
 
 
 def decode_command(data: bytes | bytearray | memoryview) -> Command:
     """The command in a datagram; raises :class:`CarLinkError` (and nothing else) if invalid."""
+    _, _, car_id, seq, stamp_s, v_mps, omega_radps, flags = open_frame(data, _BODY, MAGIC, VERSION)
+    return Command(car_id, seq, stamp_s, v_mps, omega_radps, flags)
+
+
+def seal(body: bytes) -> bytes:
+    """A datagram: its body, then the CRC-32 of the body (u32, little-endian)."""
+    return body + _CRC.pack(zlib.crc32(body))
+
+
+def open_frame(data: object, layout: struct.Struct, magic: bytes, version: int) -> tuple:
+    """The body fields of a sealed datagram whose body is ``layout`` (starting with the
+    magic and the version), after checking, in this order, type, length, magic, version
+    and CRC; :class:`CarLinkError` otherwise."""
     if not isinstance(data, (bytes, bytearray, memoryview)):
         raise CarLinkError("type", f"expected bytes, got {type(data).__name__}")
     data = bytes(data)
-    if len(data) != DATAGRAM_SIZE:
-        raise CarLinkError("length", f"{len(data)} bytes, expected {DATAGRAM_SIZE}")
-    magic, version, car_id, seq, stamp_s, v_mps, omega_radps, flags = _BODY.unpack_from(data)
-    if magic != MAGIC:
-        raise CarLinkError("magic", f"magic {magic!r}, expected {MAGIC!r}")
-    if version != VERSION:
-        raise CarLinkError("version", f"version {version}, this end speaks {VERSION}")
-    (crc,) = _CRC.unpack_from(data, _BODY.size)
-    expected = zlib.crc32(data[:_BODY.size])
+    if len(data) != layout.size + _CRC.size:
+        raise CarLinkError("length", f"{len(data)} bytes, expected {layout.size + _CRC.size}")
+    fields = layout.unpack_from(data)
+    if fields[0] != magic:
+        raise CarLinkError("magic", f"magic {fields[0]!r}, expected {magic!r}")
+    if fields[1] != version:
+        raise CarLinkError("version", f"version {fields[1]}, this end speaks {version}")
+    (crc,) = _CRC.unpack_from(data, layout.size)
+    expected = zlib.crc32(data[:layout.size])
     if crc != expected:
         raise CarLinkError("crc", f"crc 0x{crc:08x}, computed 0x{expected:08x}")
-    return Command(car_id, seq, stamp_s, v_mps, omega_radps, flags)
+    return fields
 
 
 def seq_after(seq: int, last: int) -> bool:

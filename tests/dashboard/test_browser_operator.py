@@ -6,12 +6,11 @@ release button releases them to wait for a new start."""
 import subprocess
 import sys
 import time
-import urllib.request
 
 import pytest
 
 from tests.conftest import wait_for
-from tests.dashboard.test_browser import ARTIFACTS, CHROMIUM_FLAGS, chromium
+from tests.dashboard.test_browser import ARTIFACTS, CHROMIUM_FLAGS, chromium, page_up
 from trustfg.fleet.launch import free_port
 from trustfg.fleet.testbed import LoopbackFleet
 
@@ -37,13 +36,6 @@ def operated(intersection, tmp_path_factory):
         finally:
             page.terminate()
             page.communicate(timeout=10)
-
-
-def page_up(port):
-    try:
-        return urllib.request.urlopen(f"http://127.0.0.1:{port}/api/map", timeout=1).status == 200
-    except OSError:
-        return False
 
 
 def test_only_the_operators_page_stops_the_fleet_and_the_cars_stay_stopped_until_released(operated):
