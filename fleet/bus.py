@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import logging
+import re
 import threading
 import time
 from collections import Counter, deque
@@ -60,6 +61,9 @@ def zenoh_config(bus: BusConfig, extra_listen: tuple[str, ...] = ()) -> zenoh.Co
                                    f"{bus.zenoh_config}: set it in one place")
                 log.info("bus.%s: %r from %s", field_name, theirs, bus.zenoh_config)
         listen = _merged(_get(config, "listen/endpoints"), [*bus.listen, *extra_listen])
+        fixed = [e for e in listen if re.search(r":0(?:$|[?#])", e)]
+        if fixed:
+            raise BusError(f"listen endpoint {fixed[0]}: port 0 would be a port nobody can be told; name one")
         if listen:
             config.insert_json5("listen/endpoints", json.dumps(listen))
         connect = [e for e in _merged(_get(config, "connect/endpoints"), list(bus.connect))
@@ -136,13 +140,18 @@ class FleetBus:
 
     def open(self) -> None:
         try:
-            self._session = zenoh.open(zenoh_config(self.config, self._listen))
+            config = zenoh_config(self.config, self._listen)
+            self._session = zenoh.open(config)
         except BusError:
             raise
         except Exception as exc:
             raise BusError(f"cannot open a Zenoh session: {exc}") from exc
         session = self._session
         fleet = self.fleet
+        listening = _get(config, "listen/endpoints")
+        if isinstance(listening, list) and listening:
+            log.info("%s: Zenoh listening on %s", f"car {self.car_id}" if self.car_id else "operator/observer",
+                     ", ".join(listening))
         if self.car_id is not None:
             cid = self.car_id
             self._publishers["plan"] = zext.declare_advanced_publisher(

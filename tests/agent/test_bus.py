@@ -123,3 +123,8 @@ def test_a_car_answers_the_operators_clock_query():
         assert sent <= received and abs(theirs - (sent + received) / 2 - 5.0) < 0.05
         assert operator.query_clocks(9, timeout_s=0.2) is None  # no such car: nobody answers
         assert car.counters["clock_queries"] == 1
+
+
+def test_a_listen_endpoint_on_port_0_is_refused():
+    with pytest.raises(BusError, match="port 0"):
+        zenoh_config(BusConfig(listen=("tcp/127.0.0.1:0",)))
