@@ -14,9 +14,11 @@ car's own answer on its link -- and exits with 1 when a named car confirmed on n
 
 from __future__ import annotations
 
+import argparse
 import sys
 import time
 
+from ..agent.config import Scenario
 from ..agent.scenario_files import load_scenario
 from .command import command_parser, configured
 from .link_stop import DIRECT_PERIOD_S, DIRECT_REPEAT_S, LinkStopper, named
@@ -66,7 +68,8 @@ def main(argv: list[str] | None = None) -> int:
             stopper.close()
 
 
-def _on_the_bus(fleet, cars, action, args, stopper, issued, sent_direct) -> int:
+def _on_the_bus(fleet: Scenario, cars: list[int], action: str, args: argparse.Namespace,
+                stopper: LinkStopper | None, issued: float, sent_direct: float | None) -> int:
     from ..agent import messages  # imported after the direct path went out
     from .bus import BusError, FleetBus
     from .operator import OperatorSession
@@ -112,15 +115,15 @@ def _on_the_bus(fleet, cars, action, args, stopper, issued, sent_direct) -> int:
             session.close()
         if bus is not None:
             bus.close()
-    return _report(fleet, cars, action, seen, stopper, issued, sent_direct)
+    return _report(cars, action, seen, stopper, issued, sent_direct)
 
 
-def _latched(stopper, car: int) -> bool | None:
+def _latched(stopper: LinkStopper | None, car: int) -> bool | None:
     answer = stopper.answers.get(car) if stopper is not None else None
     return None if answer is None else answer.e_stop_latched
 
 
-def _confirmed(action: str, state: str, stopper, car: int) -> bool:
+def _confirmed(action: str, state: str, stopper: LinkStopper | None, car: int) -> bool:
     latched = _latched(stopper, car)
     if action == "estop":
         return CONFIRMED[action](state) or latched is True
@@ -129,7 +132,8 @@ def _confirmed(action: str, state: str, stopper, car: int) -> bool:
     return CONFIRMED[action](state)
 
 
-def _report(fleet, cars, action, seen, stopper, issued, sent_direct) -> int:
+def _report(cars: list[int], action: str, seen: dict[int, str], stopper: LinkStopper | None, issued: float,
+            sent_direct: float | None) -> int:
     if sent_direct is not None:
         print(f"E_STOP sent straight to the links of cars {' '.join(map(str, cars))} "
               f"{(sent_direct - issued) * 1e3:.0f} ms after the command")
