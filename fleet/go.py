@@ -124,6 +124,7 @@ class Go:
 
     def watch(self, trial: int, cars: list[int], keys) -> int:
         arrived: set[int] = set()
+        said = {car: "driving" for car in cars}
         while True:
             self.poll(0.0)
             for car in cars:
@@ -131,6 +132,10 @@ class Go:
                 if car not in arrived and seen.trial == trial and seen.state == "arrived":
                     arrived.add(car)
                     print(f"car {car} is at its goal", flush=True)
+                elif seen.trial == trial and seen.state not in (said[car], "arrived"):
+                    print(f"car {car}: {seen.state}", flush=True)  # stuck, e-stopped, back to waiting...
+                if seen.trial == trial:
+                    said[car] = seen.state
             if len(arrived) == len(cars):
                 print(f"trial {trial} ended: every car at its goal", flush=True)
                 return 0
