@@ -16,7 +16,9 @@ goes ``--path link`` only: the direct path with no car process's cooperation; th
 processes are resumed after a second -- they never heard of the stop and command motion
 again -- and the cars must still hold until the release. ``--bus-stops`` more rounds use
 ``--path bus`` only, to show the bus path alone (a fresh process first opens its Zenoh
-session). Prints the table the README quotes.
+session), and ``--session-stops`` rounds stop from the benchmark's own running operator
+session, as ``trustfg go``'s stop key and the dashboard's button do (measured from the
+call). Prints the table the README quotes.
 """
 
 from __future__ import annotations
@@ -65,7 +67,7 @@ class Operator:
         self.bus = FleetBus(fleet.bus, fleet.fleet, None, listen=(f"tcp/127.0.0.1:{free_port()}",),
                             kinds=("status",), operator_kinds=())
         self.bus.open()
-        self.session = OperatorSession(fleet, self.bus, direct=False)
+        self.session = OperatorSession(fleet, self.bus)
         self.inbox = messages.Inbox()
 
     def poll(self, seconds: float = 0.0) -> None:
@@ -99,8 +101,12 @@ def one_stop(run: Path, log: CommandLog, operator: Operator, ids: list[int], del
     for pid in pids:
         os.killpg(pid, signal.SIGSTOP)
     issued = time.time()
-    stop = subprocess.run([sys.executable, "-m", "trustfg", "stop", "--config", str(run / "fleet.toml"),
-                           "--path", path, "--wait", "1"], capture_output=True, text=True, timeout=30)
+    if path == "session":  # what trustfg go's stop key and the dashboard's button do
+        operator.session.estop()
+        exit_status = 0
+    else:
+        exit_status = subprocess.run([sys.executable, "-m", "trustfg", "stop", "--config", str(run / "fleet.toml"),
+                                      "--path", path, "--wait", "1"], capture_output=True, timeout=30).returncode
     operator.poll(HOLD_S)
     for pid in pids:
         os.killpg(pid, signal.SIGCONT)
@@ -112,7 +118,7 @@ def one_stop(run: Path, log: CommandLog, operator: Operator, ids: list[int], del
            "latency_s": None if latency is None else round(latency, 4),
            "all_stopped": all(held[car] is not None for car in ids),
            "moved_again": sorted(log.moved_after(max((t for t in held.values() if t), default=issued))),
-           "stop_exit": stop.returncode}
+           "stop_exit": exit_status}
     operator.session.release()
     operator.wait_states({"waiting", "arrived"}, 10.0)
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
@@ -135,6 +141,8 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--stops", type=int, default=20, help="stops with trustfg stop's default (both paths)")
     parser.add_argument("--bus-stops", type=int, default=5, help="stops on the bus path alone")
+    parser.add_argument("--session-stops", type=int, default=5,
+                        help="stops from a running operator's session (go's key, the dashboard's button)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the random moments")
     parser.add_argument("--out", type=Path, default=None, help="write every stop as JSON here")
     args = parser.parse_args()
@@ -158,7 +166,8 @@ def main() -> int:
         operator.wait_states({"waiting"}, 10.0)
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
             s.sendto(b'{"reset": true}', ("127.0.0.1", control_port))
-        plan = [("both", k % 4 == 3) for k in range(args.stops)] + [("bus", False)] * args.bus_stops
+        plan = ([("both", k % 4 == 3) for k in range(args.stops)] + [("bus", False)] * args.bus_stops
+                + [("session", False)] * args.session_stops)
         for k, (path, pause) in enumerate(plan):
             row = one_stop(run, CommandLog(run / "commands.csv"), operator, ids, float(rng.uniform(1.0, 4.0)),
                            "link" if pause else path, pause, control_port)
@@ -169,10 +178,11 @@ def main() -> int:
             operator.bus.close()
         os.killpg(sim.pid, signal.SIGINT)
         sim.wait(60)
-    both = [r for r in rows if r["path"] != "bus"]
+    both = [r for r in rows if r["path"] in ("both", "link")]
     result = {"trustfg stop (both paths; every 4th: link only, car processes stopped)": summary(both),
               "of which car processes stopped": summary([r for r in both if r["car_processes_paused"]]),
               "bus path alone": summary([r for r in rows if r["path"] == "bus"]),
+              "an operator's session (both paths)": summary([r for r in rows if r["path"] == "session"]),
               "rows": rows}
     for name, numbers in result.items():
         if name != "rows":
