@@ -4,7 +4,8 @@ An e-stop goes two independent ways at once: E_STOP datagrams straight to each n
 link (no car process needed: the car latches it whatever else it hears) and a stop message
 on the bus, which every car process applies (it sends E_STOP itself and ends its trial).
 A car stays stopped until the operator releases it (``--release``: on the bus; each car
-process then sends RELEASE in its own sequence, and the car waits for a new start).
+process then sends RELEASE in its own sequence, and the car waits for a new start -- a
+release never resumes a trial, and a named car still driving ends its trial).
 ``--abort`` ends the running trial instead: the cars hold still (STOP, not latched) and
 wait for the next start.
 
