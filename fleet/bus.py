@@ -46,7 +46,10 @@ def zenoh_config(bus: BusConfig, extra_listen: tuple[str, ...] = ()) -> zenoh.Co
     the file when it sets them, and a ``[bus]`` value that differs both from the file's and
     from its own default is an error naming both (BusError)."""
     try:
-        config = zenoh.Config.from_file(str(Path(bus.zenoh_config))) if bus.zenoh_config else zenoh.Config()
+        try:
+            config = zenoh.Config.from_file(str(Path(bus.zenoh_config))) if bus.zenoh_config else zenoh.Config()
+        except Exception as exc:
+            raise BusError(f"bus.zenoh_config {bus.zenoh_config}: {_said(exc)}") from exc
         default = BusConfig()
         for path, field_name in (("mode", "mode"), ("scouting/multicast/enabled", "multicast_scouting"),
                                  ("scouting/multicast/interface", "multicast_interface")):
@@ -73,8 +76,13 @@ def zenoh_config(bus: BusConfig, extra_listen: tuple[str, ...] = ()) -> zenoh.Co
     except BusError:
         raise
     except Exception as exc:  # zenoh raises ZError and others for bad files or values
-        raise BusError(f"bad Zenoh configuration: {exc}") from exc
+        raise BusError(f"bad Zenoh configuration: {_said(exc)}") from exc
     return config
+
+
+def _said(exc: Exception) -> str:
+    """Zenoh's message without the Rust source location it ends with."""
+    return str(exc).split(" at /")[0].strip()
 
 
 def _get(config: zenoh.Config, path: str):

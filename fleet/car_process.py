@@ -62,7 +62,7 @@ from ..bridge.carlink import Answer, CommandSender, Flags, open_sender
 from ..bridge.guard import speed_cap
 from ..bridge.natnet_client import NatNetClient, NatNetConnectionError, client_options
 from ..bridge.tracking import track
-from .bus import BusError, FleetBus, Received
+from .bus import BusError, FleetBus, Received, zenoh_config
 from .car_report import ControlStats, WaitingLog, waiting_for, write_stats
 from .command import command_parser, configured, stop_on_signals
 from .ticker import ticks
@@ -81,6 +81,10 @@ class CarProcess:
     def __init__(self, scenario: Scenario, car: CarConfig, clock=time.time):
         if not car.link:
             raise ConfigError(f"cars[id={car.id}].link: a car process needs the address of its car")
+        try:  # a bad [bus] or zenoh_config file is the config's fault: one line now, not retries
+            zenoh_config(scenario.bus, car.listen)
+        except BusError as exc:
+            raise ConfigError(str(exc)) from None
         self.scenario = scenario
         self.car = car
         self.clock = clock

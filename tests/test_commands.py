@@ -52,6 +52,7 @@ def test_help_shows_every_default_and_a_whole_description(name, monkeypatch):
     ["go", "--config", "intersection", "--lead", "0"],
     ["car", "--id", "9", "--config", "intersection"],
     ["car", "--id", "1", "--config", "intersection"],  # a scene has no car links
+    ["car", "--id", "1", "--config", "deploy/lab/fleet-secure.toml"],  # its zenoh_config is not on this machine
     ["dashboard", "--config", "intersection", "--port", "1", "--host", "192.0.2.1"],
     ["dashboard", "--config", "deploy/lab/fleet-secure.toml", "--operator", "--host", "0.0.0.0"],
     ["sim", "--deadman", "-1"],
