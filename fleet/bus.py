@@ -49,7 +49,7 @@ def zenoh_config(bus: BusConfig, extra_listen: tuple[str, ...] = ()) -> zenoh.Co
         try:
             config = zenoh.Config.from_file(str(Path(bus.zenoh_config))) if bus.zenoh_config else zenoh.Config()
         except Exception as exc:
-            raise BusError(f"bus.zenoh_config {bus.zenoh_config}: {_said(exc)}") from exc
+            raise BusError(f"bad Zenoh configuration in bus.zenoh_config {bus.zenoh_config}: {_said(exc)}") from exc
         default = BusConfig()
         for path, field_name in (("mode", "mode"), ("scouting/multicast/enabled", "multicast_scouting"),
                                  ("scouting/multicast/interface", "multicast_interface")):
@@ -81,8 +81,8 @@ def zenoh_config(bus: BusConfig, extra_listen: tuple[str, ...] = ()) -> zenoh.Co
 
 
 def _said(exc: Exception) -> str:
-    """Zenoh's message without the Rust source location it ends with."""
-    return str(exc).split(" at /")[0].strip()
+    """Zenoh's message on one line, without the Rust source location it ends with."""
+    return " ".join(line.strip() for line in str(exc).split(" at /")[0].splitlines() if line.strip())
 
 
 def _get(config: zenoh.Config, path: str):
