@@ -15,8 +15,6 @@ import sys
 import threading
 from typing import Callable, TypeVar
 
-from ..agent.config import ConfigError
-
 T = TypeVar("T")
 
 
@@ -57,6 +55,8 @@ def stop_on_signals(stop: threading.Event) -> threading.Event:
 
 def configured(prog: str, build: Callable[[], T]) -> T:
     """``build()``; on a :class:`ConfigError` print ``prog: error`` and exit with status 2."""
+    from ..agent.config import ConfigError  # here: trustfg stop parses its arguments before the config loads
+
     try:
         return build()
     except ConfigError as exc:

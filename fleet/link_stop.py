@@ -8,17 +8,23 @@ sequence: rule 4), repeats the E_STOP for ``repeat_s`` (Wi-Fi loses datagrams) a
 the cars' answers, which tell whether the latch took. The answers only inform: the
 E_STOPs go out whatever they say.
 
-This module imports nothing heavy (no Zenoh, no numpy): ``trustfg stop`` sends its first
-datagrams within a few tens of milliseconds of being started.
+This module imports nothing heavy (no Zenoh, no numpy, not even the typed config, whose
+dataclasses take tens of milliseconds to build): ``trustfg stop`` reads the cars' links
+straight from the config file (:func:`first_e_stop`) and sends its first E_STOPs before
+anything else loads; the typed config follows and is the authority.
 """
 
 from __future__ import annotations
 
 import time
-from typing import Callable, Iterable
+import tomllib
+from pathlib import Path
+from typing import TYPE_CHECKING, Callable, Iterable
 
-from ..agent.config import Scenario
 from ..bridge.carlink import Answer, CommandSender, Flags, open_sender
+
+if TYPE_CHECKING:
+    from ..agent.config import Scenario
 
 DIRECT_PERIOD_S = 0.02
 """The direct path repeats its E_STOP at the command rate of a car process (50 Hz)."""
@@ -26,7 +32,7 @@ DIRECT_REPEAT_S = 0.5
 """... for this long after the stop (25 datagrams: losing a few does not matter)."""
 
 
-def named(fleet: Scenario, cars: Iterable[int] = ()) -> list[int]:
+def named(fleet: "Scenario", cars: Iterable[int] = ()) -> list[int]:
     """The car ids a command names (none: every car); ValueError for an unknown one."""
     ids = [c.id for c in fleet.cars]
     chosen = list(cars) or ids
@@ -39,7 +45,7 @@ def named(fleet: Scenario, cars: Iterable[int] = ()) -> list[int]:
 class LinkStopper:
     """E_STOP (and PING) datagrams straight to cars' links; see the module docstring."""
 
-    def __init__(self, fleet: Scenario, clock: Callable[[], float] = time.time):
+    def __init__(self, fleet: "Scenario", clock: Callable[[], float] = time.time):
         self.clock = clock
         self.senders: dict[int, CommandSender] = {
             car.id: open_sender(car, stamp_clock=clock, stop_repeats=0) for car in fleet.cars if car.link}
@@ -87,3 +93,30 @@ class LinkStopper:
         for sender in self.senders.values():
             sender.close()  # stop_repeats=0: it sends nothing on the way out
         self.senders.clear()
+
+
+def first_e_stop(source: str, cars: Iterable[int] = ()) -> list[int]:
+    """One E_STOP (with PING) to each named car (none: every car) whose ``link`` a config
+    *file* names, read with tomllib alone; the cars it reached. Anything unexpected (a
+    shipped name, a car without a plain ``udp://HOST:PORT`` link) is left to the typed
+    path that follows. These are version-1 datagrams: a car whose link needs more ignores
+    them and is stopped by the typed path's, a few milliseconds later."""
+    try:
+        tables = tomllib.loads(Path(source).read_text(encoding="utf-8")).get("cars", [])
+    except (OSError, ValueError):
+        return []
+    wanted, reached = set(cars), []
+    for table in tables if isinstance(tables, list) else []:
+        car, link = (table.get("id"), table.get("link")) if isinstance(table, dict) else (None, None)
+        if not (isinstance(car, int) and 1 <= car <= 255 and isinstance(link, str) and link.startswith("udp://")):
+            continue
+        host, _, port = link[len("udp://"):].rpartition(":")
+        if (wanted and car not in wanted) or not host or not port.isdigit():
+            continue
+        try:
+            with CommandSender(car, (host.strip("[]"), int(port)), stop_repeats=0) as sender:
+                sender.send(0.0, 0.0, Flags.E_STOP | Flags.STOP | Flags.PING)
+        except (OSError, ValueError):
+            continue
+        reached.append(car)
+    return reached

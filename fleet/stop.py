@@ -18,11 +18,13 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from typing import TYPE_CHECKING
 
-from ..agent.config import Scenario
-from ..agent.scenario_files import load_scenario
 from .command import command_parser, configured
-from .link_stop import DIRECT_PERIOD_S, DIRECT_REPEAT_S, LinkStopper, named
+from .link_stop import DIRECT_PERIOD_S, DIRECT_REPEAT_S, LinkStopper, first_e_stop, named
+
+if TYPE_CHECKING:
+    from ..agent.config import Scenario
 
 CONFIRMED = {"estop": lambda state: state == "e_stopped", "release": lambda state: state not in ("e_stopped", ""),
              "abort": lambda state: state not in ("driving", "stuck", "")}
@@ -49,6 +51,10 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"a {action} goes on the bus only (--path bus or both)")
     if not (args.repeat >= 0 and args.wait >= 0):
         parser.error("--repeat and --wait must be >= 0")
+    sent_direct = time.time() if action == "estop" and args.path != "bus" and first_e_stop(args.config, args.cars) \
+        else None  # the first E_STOPs, before the typed config loads (tens of ms)
+    from ..agent.scenario_files import load_scenario
+
     fleet = configured("trustfg stop", lambda: load_scenario(args.config))
     try:
         cars = named(fleet, args.cars)
@@ -56,12 +62,11 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(str(exc))
     stopper = None
     if action == "estop" and args.path != "bus":
-        stopper = LinkStopper(fleet)  # the direct path first: no Zenoh, no numpy before it
+        stopper = LinkStopper(fleet)  # the direct path, repeated: no Zenoh, no numpy before it
         stopper.engage(cars, time.time(), args.repeat)
-        sent_direct = time.time()
+        sent_direct = sent_direct or time.time()
     else:
         stopper = LinkStopper(fleet) if action == "release" else None  # to see the latch go
-        sent_direct = None
     try:
         return _on_the_bus(fleet, cars, action, args, stopper, issued, sent_direct)
     finally:
@@ -69,7 +74,7 @@ def main(argv: list[str] | None = None) -> int:
             stopper.close()
 
 
-def _on_the_bus(fleet: Scenario, cars: list[int], action: str, args: argparse.Namespace,
+def _on_the_bus(fleet: "Scenario", cars: list[int], action: str, args: argparse.Namespace,
                 stopper: LinkStopper | None, issued: float, sent_direct: float | None) -> int:
     from ..agent import messages  # imported after the direct path went out
     from .bus import BusError, FleetBus
@@ -103,9 +108,10 @@ def _on_the_bus(fleet: Scenario, cars: list[int], action: str, args: argparse.Na
                             and received.at >= published:
                         seen[message.sender] = message.state
             on_bus = bus is None or all(CONFIRMED[action](seen[car]) for car in cars)
-            if on_bus and all(_confirmed(action, seen[car], stopper, car) for car in cars) \
-                    and not (stopper and stopper.busy):
-                break  # every car confirmed (on the bus, when it is asked); else until --wait
+            on_links = stopper is None or all(car in stopper.answers for car in cars if car in stopper.senders)
+            if on_bus and on_links and all(_confirmed(action, seen[car], stopper, car) for car in cars) \
+                    and not _busy(stopper):
+                break  # every car confirmed on every path asked; else until --wait
             time.sleep(DIRECT_PERIOD_S)
     except BusError as exc:
         print(f"trustfg stop: the bus: {exc}", file=sys.stderr)
@@ -117,6 +123,10 @@ def _on_the_bus(fleet: Scenario, cars: list[int], action: str, args: argparse.Na
         if bus is not None:
             bus.close()
     return _report(cars, action, seen, stopper, issued, sent_direct)
+
+
+def _busy(stopper: LinkStopper | None) -> bool:
+    return stopper is not None and stopper.busy
 
 
 def _latched(stopper: LinkStopper | None, car: int) -> bool | None:

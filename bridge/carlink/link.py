@@ -28,9 +28,8 @@ import socket
 import threading
 import time
 from dataclasses import dataclass
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
-from ...agent.config import CarConfig, parse_udp_address
 from .answer import Answer, decode_answer, encode_answer
 from .codec import SEQ_MODULUS, CarLinkError, Command, Flags, _check_int, encode_command
 from .receiver import (
@@ -39,6 +38,9 @@ from .receiver import (
     CommandFilter,
     FilterCounters,
 )
+
+if TYPE_CHECKING:
+    from ...agent.config import CarConfig
 
 log = logging.getLogger(__name__)
 
@@ -310,8 +312,10 @@ class CommandReceiver:
                 log.debug("car %d: answer to %s failed: %s", self.car_id, source, exc)
 
 
-def open_sender(car: CarConfig, *, stamp_clock: Clock = time.time, **options) -> CommandSender:
+def open_sender(car: "CarConfig", *, stamp_clock: Clock = time.time, **options) -> CommandSender:
     """The sender for ``car``'s link, as its config asks (``cars[].link``); ConfigError for
     a bad address. ``options`` go to :class:`CommandSender`."""
+    from ...agent.config import parse_udp_address  # not at import: trustfg stop's first datagrams go first
+
     host, port = parse_udp_address(car.link, f"cars[id={car.id}].link")
     return CommandSender(car.id, (host, port), stamp_clock=stamp_clock, **options)
