@@ -63,6 +63,10 @@ def zenoh_config(bus: BusConfig, extra_listen: tuple[str, ...] = ()) -> zenoh.Co
                     raise BusError(f"bus.{field_name} = {ours!r} contradicts {path} = {theirs!r} in "
                                    f"{bus.zenoh_config}: set it in one place")
                 log.info("bus.%s: %r from %s", field_name, theirs, bus.zenoh_config)
+        if _get(config, "scouting/multicast/enabled") is False and _get(config, "scouting/delay") is None:
+            # Zenoh waits scouting/delay (500 ms) in open() for peers to scout; with listed
+            # endpoints there is nothing to scout (and an e-stop must not wait half a second).
+            config.insert_json5("scouting/delay", "0")
         listen = _merged(_get(config, "listen/endpoints"), [*bus.listen, *extra_listen])
         fixed = [e for e in listen if re.search(r":0(?:$|[?#])", e)]
         if fixed:
