@@ -150,7 +150,10 @@ class BusConfig:
     Lab: multicast scouting on the Wi-Fi interface, listed endpoints, or a router
     (``mode = "client"`` with ``connect`` naming it). ``zenoh_config`` names a JSON5 file
     (deploy/zenoh/) used as the base -- TLS, access control -- that the fields here
-    complete.
+    complete: endpoints are added to the file's; mode and multicast scouting come from the
+    file when it sets them, and a value here that contradicts the file is an error
+    (fleet.bus.zenoh_config). Without multicast scouting a session opens at once (no
+    scouting delay).
     """
 
     mode: str = "peer"
