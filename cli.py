@@ -19,11 +19,14 @@ COMMANDS = {
     "go": ("trustfg.fleet.go", "the operator's session: start a trial, watch it, stop it (keys)"),
     "stop": ("trustfg.fleet.stop", "emergency stop (or release, or abort) of the fleet or some cars"),
     "check": ("trustfg.fleet.check", "bring-up check, motors held: poses, links, bus, clocks, what is missing"),
+    "router": ("trustfg.fleet.router", "a Zenoh router (no zenohd needed) for cars that talk through one"),
     "dashboard": ("trustfg.dashboard.server", "the live web page of a fleet, or a recorded run replayed"),
     "record": ("trustfg.fleet.recording", "record a live fleet to an MCAP file"),
+    "foxglove": ("trustfg.dashboard.foxglove_live", "serve the live fleet to Foxglove (WebSocket protocol)"),
     "report": ("trustfg.dashboard.report", "figures and an HTML report from a recorded run"),
     "secure-config": ("trustfg.fleet.security", "Zenoh mutual-TLS and access-control config for one fleet member"),
-    "experiment": ("trustfg.fleet.experiments", "run the paper's experiments in the in-process simulation"),
+    "experiment": ("trustfg.fleet.experiments", "run the paper's experiments (and the scenario bank) in-process"),
+    "scenario": ("trustfg.fleet.scenes", "generate a scene from a seed, or check a scene's starts and goals"),
 }
 
 

@@ -262,6 +262,7 @@ class CarAgent:
             return None
         self.plan = result.plan
         self.last_result = result
+        self.counters["peers_out_of_reach"] += result.peers_out_of_reach
         self.replan_ms.append(result.time_ms)
         return result
 

@@ -111,21 +111,21 @@ def nearest_on_polyline(p: np.ndarray, segments: np.ndarray) -> tuple[np.ndarray
     On a segment's interior q moves along the segment, dq/dp = u u^T (u its unit
     direction); at an end point q is fixed, dq/dp = 0.
     """
-    a, b = segments[:, 0], segments[:, 1]  # (S, 2)
-    ab = b - a
-    length2 = np.maximum(np.sum(ab * ab, axis=-1), 1e-12)
-    s = np.sum((p[..., None, :] - a) * ab, axis=-1) / length2  # (..., S)
+    a, ab = segments[:, 0], segments[:, 1] - segments[:, 0]  # (S, 2)
+    length2 = np.maximum(np.einsum("sd,sd->s", ab, ab), 1e-12)
+    rel = p[..., None, :] - a  # (..., S, 2)
+    s = np.einsum("...sd,sd->...s", rel, ab) / length2
     interior = (s > 0.0) & (s < 1.0)
-    s = np.clip(s, 0.0, 1.0)
-    q = a + s[..., None] * ab  # (..., S, 2)
-    d2 = np.sum((p[..., None, :] - q) ** 2, axis=-1)
-    best = np.argmin(d2, axis=-1)
-    q_best = np.take_along_axis(q, best[..., None, None], axis=-2)[..., 0, :]
+    np.clip(s, 0.0, 1.0, out=s)
+    offset = (rel - s[..., None] * ab).reshape(-1, len(ab), 2)  # p - q per segment
+    rows = np.arange(len(offset))
+    best = np.argmin(np.einsum("nsd,nsd->ns", offset, offset), axis=-1)
+    q = p - offset[rows, best].reshape(p.shape)
     unit = ab / np.sqrt(length2)[:, None]
     projector = unit[:, :, None] * unit[:, None, :]  # (S, 2, 2)
-    on_interior = np.take_along_axis(interior, best[..., None], axis=-1)[..., 0]
-    dq_dp = np.where(on_interior[..., None, None], projector[best], 0.0)
-    return q_best, dq_dp
+    on_interior = interior.reshape(-1, len(ab))[rows, best]
+    dq_dp = (projector[best] * on_interior[:, None, None]).reshape(p.shape + (2,))
+    return q, dq_dp
 
 
 def check_residuals(p: np.ndarray, v: np.ndarray, peer_positions: np.ndarray,
@@ -136,40 +136,41 @@ def check_residuals(p: np.ndarray, v: np.ndarray, peer_positions: np.ndarray,
 
     Returns the residuals (..., R) with R = M + 2 (+ 2 with a lane) rows [obstacle,
     peer 1..M, speed, lane x, lane y] and their derivatives d/dp and d/dv, (..., R, 2).
+    Written into preallocated arrays with few numpy calls: the planner evaluates a few
+    hundred checks per call, where each numpy call's overhead outweighs its arithmetic.
     """
+    m = peer_positions.shape[-2]
+    lane_rows = 2 if lane is not None and len(lane) else 0
+    shape = p.shape[:-1]
+    residual = np.empty(shape + (m + 2 + lane_rows,))
+    d_dp = np.zeros(shape + (m + 2 + lane_rows, 2))
+    d_dv = np.zeros_like(d_dp)
+
     # Obstacle, eq. (6): c = max(0, eps - d(p)); dc/dp = -grad d where active.
     dist, grad = sdf.distance_and_gradient(p)
-    active = dist < epsilon_obstacle
-    obstacle = hinge(epsilon_obstacle, dist)
-    obstacle_dp = np.where(active[..., None], -grad, 0.0)
+    np.maximum(epsilon_obstacle - dist, 0.0, out=residual[..., 0])
+    np.multiply(grad, np.where(dist < epsilon_obstacle, -1.0, 0.0)[..., None], out=d_dp[..., 0, :])
 
     # Proximity, eq. (9): c = max(0, eps_b - |p - p_b|); dc/dp = -(p - p_b)/|p - p_b|.
-    diff = p[..., None, :] - peer_positions  # (..., M, 2)
-    d = np.sqrt(np.sum(diff * diff, axis=-1))
-    active = d < epsilons
-    proximity = hinge(epsilons, d)
-    safe_d = np.where(d > 1e-9, d, 1.0)
-    proximity_dp = np.where(active[..., None], -diff / safe_d[..., None], 0.0)
+    if m:
+        diff = p[..., None, :] - peer_positions  # (..., M, 2)
+        d = np.hypot(diff[..., 0], diff[..., 1])
+        np.maximum(epsilons - d, 0.0, out=residual[..., 1:m + 1])
+        scale = np.where(d < epsilons, -1.0 / np.where(d > 1e-9, d, 1.0), 0.0)
+        np.multiply(diff, scale[..., None], out=d_dp[..., 1:m + 1, :])
 
     # Soft speed limit: c = max(0, |v| - vmax); dc/dv = v/|v| where active.
-    speed = np.sqrt(np.sum(v * v, axis=-1))
-    active = speed > max_speed
-    over = np.where(active, speed - max_speed, 0.0)
-    safe_speed = np.where(speed > 1e-9, speed, 1.0)
-    speed_dv = np.where(active[..., None], v / safe_speed[..., None], 0.0)
+    speed = np.hypot(v[..., 0], v[..., 1])
+    np.maximum(speed - max_speed, 0.0, out=residual[..., m + 1])
+    scale = np.where(speed > max_speed, 1.0 / np.where(speed > 1e-9, speed, 1.0), 0.0)
+    np.multiply(v, scale[..., None], out=d_dv[..., m + 1, :])
 
-    rows = [obstacle[..., None], proximity, over[..., None]]
-    zeros = np.zeros_like(obstacle_dp)[..., None, :]
-    d_dp = [obstacle_dp[..., None, :], proximity_dp, zeros]
-    d_dv = [zeros, np.zeros_like(proximity_dp), speed_dv[..., None, :]]
-    if lane is not None and len(lane):
+    if lane_rows:
         # Lane keeping: residual p - q(p); d/dp = I - dq/dp.
         q, dq_dp = nearest_on_polyline(p, lane)
-        rows.append(p - q)
-        d_dp.append(np.eye(2) - dq_dp)
-        d_dv.append(np.zeros_like(dq_dp))
-    return (np.concatenate(rows, axis=-1), np.concatenate(d_dp, axis=-2),
-            np.concatenate(d_dv, axis=-2))
+        np.subtract(p, q, out=residual[..., m + 2:])
+        np.subtract(np.eye(2), dq_dp, out=d_dp[..., m + 2:, :])
+    return residual, d_dp, d_dv
 
 
 def evaluate_intervals(problem: IntervalProblem, positions: np.ndarray, velocities: np.ndarray,
@@ -181,39 +182,45 @@ def evaluate_intervals(problem: IntervalProblem, positions: np.ndarray, velociti
     intervals i (default: all N-1). Jacobian block j of a row is d(row)/d(state j) with
     states ordered (p_i, v_i, p_{i+1}, v_{i+1}).
     """
+    support = np.concatenate([positions, velocities], axis=1)  # (N, 4): p, v per row
     if intervals is None:
-        intervals = np.arange(len(positions) - 1)
-    # States of each interval stacked as (I, 4, 2): p_i, v_i, p_{i+1}, v_{i+1}.
-    states = np.stack([positions[intervals], velocities[intervals],
-                       positions[intervals + 1], velocities[intervals + 1]], axis=1)
-    w_pos = problem.weights[:, 0, :]  # (K, 4)
-    w_vel = problem.weights[:, 1, :]
-    p = np.einsum("kj,ijd->ikd", w_pos, states)  # (I, K, 2): GP-interpolated positions
-    v = np.einsum("kj,ijd->ikd", w_vel, states)
+        intervals = slice(None)
+        left, right = support[:-1], support[1:]
+    else:
+        left, right = support[intervals], support[intervals + 1]
+    # States of each interval as (I, 4, 2): p_i, v_i, p_{i+1}, v_{i+1}.
+    states = np.concatenate([left, right], axis=1).reshape(-1, 4, 2)
+    n_int, k = len(states), problem.n_checks
+    pv = problem.weights.reshape(2 * k, 4) @ states  # (I, 2K, 2): GP-interpolated p, v per check
+    p, v = pv[:, 0::2], pv[:, 1::2]
     r, d_dp, d_dv = check_residuals(p, v, problem.peer_positions[intervals], problem.epsilons,
                                     problem.sdf, problem.epsilon_obstacle, problem.max_speed,
                                     problem.lane)
-    n_int = len(intervals)
-    residual = r.reshape(n_int, -1)
     consistency = problem.consistency_targets is not None
+    residual = np.empty((n_int, problem.rows))
+    residual[:, :r[0].size] = r.reshape(n_int, -1)
     if consistency:
         # |a|_delta - abar with a = (v_{i+1} - v_i)/dt.
         a = (states[:, 3] - states[:, 1]) / problem.dt  # (I, 2)
-        root = np.sqrt(np.sum(a * a, axis=-1) + SMOOTH_ACCEL_DELTA**2)
+        root = np.sqrt(np.einsum("id,id->i", a, a) + SMOOTH_ACCEL_DELTA**2)
         excess = root - SMOOTH_ACCEL_DELTA - problem.consistency_targets[intervals]
-        consistency_active = excess > 0.0
-        residual = np.concatenate([residual, np.maximum(excess, 0.0)[:, None]], axis=1)
+        np.maximum(excess, 0.0, out=residual[:, -1])
     if not jacobians:
         return residual, None
-    # Chain rule through the interpolation: d row/d state_j = d_dp * w_pos[k, j] + d_dv * w_vel[k, j].
-    jac = (np.einsum("ikrd,kj->ikrjd", d_dp, w_pos) + np.einsum("ikrd,kj->ikrjd", d_dv, w_vel))
-    jac = jac.reshape(n_int, -1, 4, 2)
+    # Chain rule through the interpolation: d row/d state_j = d_dp w_pos[k, j] + d_dv w_vel[k, j],
+    # built as (I, 4, R, 2) -- state block first, the layout the planner hands to GTSAM.
+    weights = problem.weights.transpose(1, 2, 0)[:, :, :, None, None]  # (2, 4, K, 1, 1)
+    blocks = np.empty((n_int, 4, problem.rows, 2))
+    checks = blocks[:, :, :r[0].size].reshape(n_int, 4, k, -1, 2)
+    np.multiply(d_dp[:, None], weights[0], out=checks)
+    speed = problem.n_peers + 1  # the only row that depends on v
+    checks[:, :, :, speed] += d_dv[:, None, :, speed] * weights[1][..., 0]
     if consistency:
-        da = np.where(consistency_active[:, None], a / root[:, None] / problem.dt, 0.0)  # d/dv_{i+1}
-        extra = np.zeros((n_int, 1, 4, 2))
-        extra[:, 0, 1] = -da
-        extra[:, 0, 3] = da
-        jac = np.concatenate([jac, extra], axis=1)
+        da = a * ((excess > 0.0) / root / problem.dt)[:, None]  # d/dv_{i+1}
+        blocks[:, :, -1] = 0.0
+        blocks[:, 1, -1] = -da
+        blocks[:, 3, -1] = da
+    jac = blocks.transpose(0, 2, 1, 3)  # (I, R, 4, 2), a view
     return residual, jac
 
 

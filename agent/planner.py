@@ -10,17 +10,14 @@ at absolute times t_i = t0 + i*dt:
                  soft speed limit and consistency (agent.factors)
 
 The checks run at each support state and at ``interp_checks`` GP-interpolated times per
-interval, so a thin obstacle or a crossing peer cannot slip between two states. Two
-equivalent ways to build them (``PlannerConfig.interpolation``):
+interval, so a thin obstacle or a crossing peer cannot slip between two states; they
+become GTSAM factors in agent.interval_factors (chunks of intervals sharing one
+vectorised evaluation, or GTSAM's own interpolation factor as the reference).
 
-* ``batched`` (default): one CustomFactor per interval, keys (p_i, v_i, p_i+1, v_i+1).
-  All intervals are evaluated together in one vectorised numpy call (a
-  :class:`BatchedIntervals` cache shared by the interval factors); each factor returns its
-  own slice. The residual of an interval depends only on its own four states, and the
-  cache is reused only when those match exactly, so each factor is still a pure function
-  of its keys: batching saves Python calls, not correctness.
-* ``gtsam``: GTSAM's own ``WnoaInterpFactorPoint2`` wraps a per-time CustomFactor on an
-  interpolated state; slower (one Python call per check), kept as the reference.
+Peers that cannot come within reach during the horizon -- the two cars are further
+apart than both could close at the planning speed limit, plus their epsilon and a margin
+(:func:`peers_within_reach`) -- are left out of the graph: their rows would be zero for
+any plan the car can drive, and they would cost rows in every check.
 
 Replanning is warm-started from the previous plan resampled on the new time grid
 (receding horizon), so a replan takes a few LM iterations.
@@ -29,18 +26,17 @@ Replanning is warm-started from the previous plan resampled on the new time grid
 from __future__ import annotations
 
 import dataclasses
-import functools
-import threading
 import time
 from dataclasses import dataclass
 
 import gtsam
 import numpy as np
-from gtsam.symbol_shorthand import A, B, V, X
+from gtsam.symbol_shorthand import V, X
 
 from . import factors
 from .config import PlannerConfig
 from .gp import Plan, interpolation_weights
+from .interval_factors import add_batched_checks, add_gtsam_interp_checks
 from .world import SignedDistanceField
 
 
@@ -83,6 +79,9 @@ class PlanResult:
     final_error: float
     time_ms: float
     warm: bool
+    peers_out_of_reach: int = 0
+    """Peers of the request left out of the graph: they cannot come within reach during
+    the horizon (:func:`peers_within_reach`)."""
 
 
 def plan_trajectory(request: PlanRequest, config: PlannerConfig, sdf: SignedDistanceField) -> PlanResult:
@@ -108,6 +107,7 @@ def plan_trajectory(request: PlanRequest, config: PlannerConfig, sdf: SignedDist
     t0 = request.t_now
     problem = interval_problem(request, config, sdf, t0, dt)
     graph = build_graph(request, config, sdf, t0, dt, problem)
+    left_out = len(request.peers) - problem.n_peers if config.proximity else 0
     if request.warm_start is not None:
         values = _values(anchored(request.warm_start.resampled(t0, dt, n), request.position, request.velocity))
     else:
@@ -126,7 +126,7 @@ def plan_trajectory(request: PlanRequest, config: PlannerConfig, sdf: SignedDist
     params.setlambdaFactor(config.lambda_factor)
     params.setDiagonalDamping(config.diagonal_damping)
     optimizer = gtsam.LevenbergMarquardtOptimizer(graph, values, params)
-    initial_error = graph.error(values)
+    initial_error = optimizer.error()  # evaluated by the constructor
     try:
         result = optimizer.optimize()
     except RuntimeError as exc:  # e.g. an indeterminant linear system
@@ -143,6 +143,7 @@ def plan_trajectory(request: PlanRequest, config: PlannerConfig, sdf: SignedDist
         final_error=float(optimizer.error()),
         time_ms=(time.perf_counter() - started) * 1e3,
         warm=request.warm_start is not None,
+        peers_out_of_reach=left_out,
     )
 
 
@@ -181,16 +182,17 @@ def interval_problem(request: PlanRequest, config: PlannerConfig, sdf: SignedDis
     fractions = factors.check_fractions(config.interp_checks)
     check_times = t0 + (np.arange(n - 1)[:, None] + fractions[None, :]) * dt  # (I, K)
     peers = request.peers if config.proximity or config.consistency else ()
-    if peers and config.proximity:
-        peer_positions = np.stack([p.plan.position_at(check_times.ravel()).reshape(*check_times.shape, 2)
-                                   for p in peers], axis=2)
-        epsilons = np.array([p.epsilon for p in peers])
+    near = peers_within_reach(peers, request.position, check_times, config) if config.proximity else ()
+    if near:
+        peer_positions = np.stack([positions for _, positions in near], axis=2)
+        epsilons = np.array([peer.epsilon for peer, _ in near])
     else:
         peer_positions = np.zeros((n - 1, len(fractions), 0, 2))
         epsilons = np.zeros(0)
     targets = None
     if config.consistency and peers:
-        # abar_i: the peers' mean acceleration magnitude over interval i.
+        # abar_i: the peers' mean acceleration magnitude over interval i (all peers: this
+        # is the fleet's manner of driving, near or far).
         accel = np.stack([np.linalg.norm(p.plan.acceleration_at(check_times.ravel()), axis=1)
                           .reshape(check_times.shape) for p in peers])  # (M, I, K)
         targets = accel.mean(axis=(0, 2))
@@ -207,134 +209,46 @@ def interval_problem(request: PlanRequest, config: PlannerConfig, sdf: SignedDis
     )
 
 
+def peers_within_reach(peers: tuple[PeerConstraint, ...], position: np.ndarray, check_times: np.ndarray,
+                       config: PlannerConfig) -> list[tuple[PeerConstraint, np.ndarray]]:
+    """The peers that could come within their epsilon of us before the horizon ends, each
+    with its positions at the check times (I, K, 2), in request order.
+
+    A plan drives at most v = ``max_speed_mps`` (its speed limit), and so does a peer's,
+    so over the horizon H = t_end - t0 the two close in by at most 2 v H. A peer is left
+    out only if it is out of reach both ways:
+
+    * by the speed bounds: |p_b(t0) - p_a(t0)| >= eps_b + margin + 2 v H, where p_a(t0) is
+      where our plan starts and p_b(t0) where its plan has it now -- it cannot reach us
+      whatever either of us replans; and
+    * by its plan, as the graph would use it: at every check time t,
+      |p_b(t) - p_a(t0)| >= eps_b + margin + v (t - t0), so its proximity rows would be zero
+      for every plan we can drive (this holds even if its plan breaks the speed bound).
+
+    ``margin`` is ``reach_margin_m`` (a plan's soft speed limit may be exceeded a little).
+    """
+    if not peers:
+        return []
+    t0, t_end = float(check_times[0, 0]), float(check_times[-1, -1])
+    v, margin = config.max_speed_mps, config.reach_margin_m
+    times = check_times.ravel()  # begins with t0
+    travel = v * (times - t0)
+    kept = []
+    for peer in peers:
+        positions = peer.plan.position_at(times)
+        gaps = np.hypot(positions[:, 0] - position[0], positions[:, 1] - position[1])
+        reach = peer.epsilon + margin
+        if gaps[0] < reach + 2.0 * v * (t_end - t0) or np.any(gaps < reach + travel):
+            kept.append((peer, positions.reshape(*check_times.shape, 2)))
+    return kept
+
+
 def route_segments(request: PlanRequest) -> np.ndarray:
     """The lane centre line as segments of the polyline lane[0] -> ... -> goal."""
     points = np.array([*request.lane, request.goal], dtype=float)
     if len(points) < 2:
         return np.zeros((0, 2, 2))
     return np.stack([points[:-1], points[1:]], axis=1)
-
-
-class BatchedIntervals:
-    """Evaluates every interval of a trajectory in one vectorised call, for many factors.
-
-    GTSAM linearises (or evaluates) factors one after another on the same Values; the
-    first interval factor to ask computes all intervals, the others read their slice.
-    A slice is served only if the factor's own four states equal those it was computed
-    from, so a factor's output never depends on any other key.
-    """
-
-    def __init__(self, problem: factors.IntervalProblem, n: int):
-        self.problem = problem
-        self.n = n
-        self._lock = threading.Lock()
-        self._keys = [(X(i), V(i)) for i in range(n)]
-        self._states: list[tuple[float, float, float, float]] = []
-        self._residual: np.ndarray | None = None
-        self._jacobian: np.ndarray | None = None
-        self.evaluations = 0
-
-    def _state(self, values: gtsam.Values, i: int) -> tuple[float, float, float, float]:
-        x, v = self._keys[i]
-        p, w = values.atPoint2(x), values.atVector(v)
-        return (p[0], p[1], w[0], w[1])
-
-    def interval(self, i: int, values: gtsam.Values, want_jacobian: bool
-                 ) -> tuple[np.ndarray, np.ndarray | None]:
-        left, right = self._state(values, i), self._state(values, i + 1)
-        with self._lock:
-            fresh = (
-                self._residual is not None
-                and (self._jacobian is not None or not want_jacobian)
-                and self._states[i] == left and self._states[i + 1] == right
-            )
-            if not fresh:
-                positions = gtsam.utilities.extractVectors(values, "x")
-                velocities = gtsam.utilities.extractVectors(values, "v")
-                self._states = [tuple(row) for row in np.hstack([positions, velocities]).tolist()]
-                self._residual, self._jacobian = factors.evaluate_intervals(
-                    self.problem, positions, velocities, jacobians=want_jacobian)
-                self.evaluations += 1
-            residual = self._residual[i]
-            jacobian = self._jacobian[i] if want_jacobian else None
-        return residual, jacobian
-
-
-def _batched_interval_error(batch: BatchedIntervals, i: int, this: gtsam.CustomFactor,
-                            values: gtsam.Values, H: list[np.ndarray] | None) -> np.ndarray:
-    residual, jacobian = batch.interval(i, values, H is not None)
-    if H is not None:
-        for j in range(4):
-            H[j] = jacobian[:, j, :]
-    return residual
-
-
-def add_batched_checks(graph: gtsam.NonlinearFactorGraph, problem: factors.IntervalProblem,
-                       config: PlannerConfig) -> BatchedIntervals:
-    n = config.support_states
-    batch = BatchedIntervals(problem, n)
-    sigmas = factors.interval_sigmas(problem, config.sigma_obstacle, config.sigma_proximity,
-                                     config.sigma_speed, config.sigma_lane, config.sigma_consistency)
-    model = gtsam.noiseModel.Diagonal.Sigmas(sigmas)
-    for i in range(n - 1):
-        keys = [X(i), V(i), X(i + 1), V(i + 1)]
-        graph.add(gtsam.CustomFactor(model, keys, functools.partial(_batched_interval_error, batch, i)))
-    return batch
-
-
-# --- the reference construction with GTSAM's own interpolation factor ----------------------
-
-
-def _check_error(problem: factors.IntervalProblem, i: int, k: int, this: gtsam.CustomFactor,
-                 values: gtsam.Values, H: list[np.ndarray] | None) -> np.ndarray:
-    """Rows of one check on (p, v) at check time k of interval i (keys: p, v)."""
-    keys = this.keys()
-    p = values.atPoint2(keys[0])
-    v = values.atPoint2(keys[1])  # interpolated velocities are stored as Vector2
-    residual, d_dp, d_dv = factors.check_residuals(
-        p, v, problem.peer_positions[i, k], problem.epsilons, problem.sdf,
-        problem.epsilon_obstacle, problem.max_speed, problem.lane)
-    if H is not None:
-        H[0] = d_dp
-        H[1] = d_dv
-    return residual
-
-
-def _consistency_error(problem: factors.IntervalProblem, i: int, this: gtsam.CustomFactor,
-                       values: gtsam.Values, H: list[np.ndarray] | None) -> np.ndarray:
-    keys = this.keys()
-    v0, v1 = values.atVector(keys[0]), values.atVector(keys[1])
-    a = (v1 - v0) / problem.dt
-    root = np.sqrt(a @ a + factors.SMOOTH_ACCEL_DELTA**2)
-    excess = root - factors.SMOOTH_ACCEL_DELTA - problem.consistency_targets[i]
-    if H is not None:
-        da = (a / root / problem.dt)[None, :] if excess > 0.0 else np.zeros((1, 2))
-        H[0] = -da
-        H[1] = da
-    return np.array([max(excess, 0.0)])
-
-
-def add_gtsam_interp_checks(graph: gtsam.NonlinearFactorGraph, problem: factors.IntervalProblem,
-                            config: PlannerConfig, states: list, qc: np.ndarray) -> None:
-    sigmas = factors.check_sigmas(problem, config.sigma_obstacle, config.sigma_proximity,
-                                  config.sigma_speed, config.sigma_lane)
-    model = gtsam.noiseModel.Diagonal.Sigmas(sigmas)
-    fractions = factors.check_fractions(config.interp_checks)
-    index = 0
-    for i in range(len(states) - 1):
-        left, right = states[i], states[i + 1]
-        graph.add(gtsam.CustomFactor(model, [X(i), V(i)], functools.partial(_check_error, problem, i, 0)))
-        for k in range(1, len(fractions)):
-            t = left.time + fractions[k] * (right.time - left.time)
-            inner = gtsam.CustomFactor(model, [A(index), B(index)],
-                                       functools.partial(_check_error, problem, i, k))
-            interp = gtsam.StateData(A(index), B(index), t)
-            graph.add(gtsam.WnoaInterpFactorPoint2(inner, {left, right}, {interp}, qc, True))
-            index += 1
-        if problem.consistency_targets is not None:
-            graph.add(gtsam.CustomFactor(
-                gtsam.noiseModel.Isotropic.Sigma(1, config.sigma_consistency), [V(i), V(i + 1)],
-                functools.partial(_consistency_error, problem, i)))
 
 
 # --- seeding and checks ----------------------------------------------------------------------

@@ -139,25 +139,37 @@ def _describe(value: Any) -> str:
     return text if len(text) <= 40 else text[:37] + "..."
 
 
-def dump_scenario(scenario: Scenario) -> str:
-    """TOML text that load_scenario reads back into an equal Scenario."""
+def dump_scenario(scenario: Scenario, changed_only: bool = False) -> str:
+    """TOML text that load_scenario reads back into an equal Scenario.
+
+    ``changed_only`` leaves out every value equal to its default (and tables left empty),
+    so a scene file does not freeze today's defaults of everything else."""
     lines: list[str] = []
     top = {f.name: getattr(scenario, f.name) for f in dataclasses.fields(scenario)}
+    defaults = Scenario(name="", cars=())
     for name, value in top.items():
         if not dataclasses.is_dataclass(value) and name != "cars":
-            lines.append(f"{name} = {_toml_value(value)}")
+            if not (changed_only and name != "name" and value == getattr(defaults, name)):
+                lines.append(f"{name} = {_toml_value(value)}")
     for name, value in top.items():
         if dataclasses.is_dataclass(value):
-            lines.append(f"\n[{name}]")
-            lines.extend(f"{k} = {_toml_value(v)}" for k, v in _fields(value).items())
+            fields = _fields(value, type(value)() if changed_only and name != "world" else None)
+            if fields or not changed_only:
+                lines.append(f"\n[{name}]")
+                lines.extend(f"{k} = {_toml_value(v)}" for k, v in fields.items())
     for car in scenario.cars:
         lines.append("\n[[cars]]")
-        lines.extend(f"{k} = {_toml_value(v)}" for k, v in _fields(car).items())
+        default_car = type(car)(id=car.id, start=car.start, goal=car.goal) if changed_only else None
+        lines.extend(f"{k} = {_toml_value(v)}" for k, v in _fields(car, default_car).items())
     return "\n".join(lines) + "\n"
 
 
-def _fields(obj: Any) -> dict[str, Any]:
-    return {f.name: getattr(obj, f.name) for f in dataclasses.fields(obj) if getattr(obj, f.name) is not None}
+def _fields(obj: Any, defaults: Any = None) -> dict[str, Any]:
+    """The fields of ``obj`` that are set (not None) and, given ``defaults``, differ from it."""
+    return {f.name: getattr(obj, f.name) for f in dataclasses.fields(obj)
+            if getattr(obj, f.name) is not None
+            and (defaults is None or f.name in ("id", "start", "goal", "kind")
+                 or getattr(obj, f.name) != getattr(defaults, f.name))}
 
 
 def _toml_value(value: Any) -> str:
@@ -168,7 +180,10 @@ def _toml_value(value: Any) -> str:
     if isinstance(value, str):
         return json.dumps(value)  # a JSON string is a valid TOML basic string
     if isinstance(value, (tuple, list)):
+        if value and all(dataclasses.is_dataclass(v) for v in value):  # e.g. obstacles: one a line
+            return "[\n" + "".join(f"  {_toml_value(v)},\n" for v in value) + "]"
         return "[" + ", ".join(_toml_value(v) for v in value) + "]"
     if dataclasses.is_dataclass(value):
-        return "{ " + ", ".join(f"{k} = {_toml_value(v)}" for k, v in _fields(value).items()) + " }"
+        fields = _fields(value, type(value)())  # inline tables: what differs from the defaults
+        return "{ " + ", ".join(f"{k} = {_toml_value(v)}" for k, v in fields.items()) + " }"
     raise TypeError(f"cannot write {type(value).__name__} to TOML")

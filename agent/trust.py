@@ -182,7 +182,7 @@ class TrustBook:
 
     def epsilon(self, peer: int, now: float, epsilon_0: float, transparency: bool) -> float:
         if not transparency:
-            return epsilon_0
+            return epsilon_0 * self.config.epsilon_gain_fixed
         return epsilon_0 * epsilon_gain(float(self.tau(peer, now)[TRANSPARENCY]), self.config)
 
     def report(self, sender: int, seq: int, now: float, epsilon_0: Callable[[int], float],

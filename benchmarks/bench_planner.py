@@ -1,18 +1,30 @@
-"""Planner speed: cold plan and warm replan of one car with 3 peers, and the native floor.
+"""Planner speed: cold plan and warm replan of one car, one LM iteration against the native floor.
 
     python benchmarks/bench_planner.py [--repeats R]
 
 Scenario: the intersection; car 1 (south -> north) plans against the shared plans of
 cars 2, 3 and 4, all timed to reach the middle together, so the proximity hinges are
-active. "cold" solves from the seeded route; "warm" is a receding-horizon replan 0.2 s
-later, warm-started from the previous plan (what a car does at 5 Hz). Both for N = 21
-and N = 41 support states with 4 interpolated checks per interval.
+active; with 15 peers, 12 more follow them 2.5 s, 5 s, 7.5 s and 10 s later on their
+approaches (queues). "cold" solves from the seeded route (coarse to fine); "warm" is a
+receding-horizon replan every 0.2 s, warm-started from the previous plan (what a car
+does at 5 Hz). N = 21 and N = 41 support states, 4 interpolated checks per interval.
+"(out)" counts the peers the planner left out as out of reach (none in this small scene).
+
+Per iteration: the wall time of one real Levenberg-Marquardt iteration (``iterate()``:
+linearise, damped solve, error at the new point), from the seeded route at full
+resolution, with the smallest initial lambda (the planner's, times 10^k) at which LM
+accepts its first trial step there, in both graphs (checked): a step costs the same
+whatever lambda is, and a rejected one would add a second solve. Times are wall and CPU
+(``time.process_time``): on a shared machine the OS gives other processes turns in the
+middle of a millisecond-long call, which wall time counts and CPU time does not.
 
 The floor: the same graph with every one of our Python CustomFactors replaced by a
-GTSAM-native factor on the same four keys with (at least) as many rows -- a
-LinearContainerFactor holding a fixed JacobianFactor -- so linearising, evaluating and
-solving cost what GTSAM alone costs. "x floor" is our time per LM iteration
-(linearise + evaluate + solve) over the floor's.
+GTSAM-native factor on the same keys with exactly as many rows -- a LinearContainerFactor
+holding a fixed JacobianFactor -- so linearising, evaluating and solving cost what GTSAM
+alone costs. Our interval checks are chunked, several consecutive intervals per factor
+(``PlannerConfig.intervals_per_factor``, agent.interval_factors), so the floor is chunked
+the same way: one native factor per chunk, on the chunk's keys, dense over them with the
+chunk's rows, as GTSAM holds ours. "x floor" is our time per iteration over the floor's.
 """
 
 from __future__ import annotations
@@ -26,7 +38,8 @@ import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import V, X
 
-from trustfg.agent.planner import PeerConstraint, PlanRequest, build_graph, interval_problem, plan_trajectory
+from trustfg.agent.interval_factors import chunk_bounds, chunk_keys
+from trustfg.agent.planner import PeerConstraint, PlanRequest, build_graph, interval_problem, plan_trajectory, seed_plan
 from trustfg.agent.scenario_files import load_scenario
 from trustfg.agent.world import build_sdf
 
@@ -61,18 +74,23 @@ def ego_request(scenario, peers, t_arrive, epsilon):
 
 
 def timed(fn, repeats):
-    samples = []
+    """Median (wall ms, CPU ms) of ``fn()`` over ``repeats`` calls, and its last result.
+    CPU time (this process's, all threads) does not count the time the OS gave to other
+    processes, so on a shared machine it is the steadier of the two."""
+    wall, cpu = [], []
     for _ in range(repeats):
-        started = time.perf_counter()
+        started, started_cpu = time.perf_counter(), time.process_time()
         result = fn()
-        samples.append((time.perf_counter() - started) * 1e3)
-    return statistics.median(samples), result
+        wall.append((time.perf_counter() - started) * 1e3)
+        cpu.append((time.process_time() - started_cpu) * 1e3)
+    return (statistics.median(wall), statistics.median(cpu)), result
 
 
 def native_floor_graph(request, config, sdf, t0, dt):
-    """Our graph's priors and WNOA factors plus native stand-ins of the same shape for
-    every interval factor (keys x_i, v_i, x_i+1, v_i+1; same number of rows)."""
-    n = config.support_states
+    """Our graph's priors and WNOA factors plus, for every CustomFactor of ours, a native
+    stand-in of the same shape: a LinearContainerFactor holding a fixed JacobianFactor on
+    the same keys (a chunk's p_s, v_s) with exactly as many rows, dense over its keys as
+    GTSAM holds ours."""
     graph = gtsam.NonlinearFactorGraph()
     full = build_graph(request, dataclasses.replace(config, proximity=False, consistency=False), sdf, t0, dt)
     for k in range(full.size()):
@@ -81,83 +99,119 @@ def native_floor_graph(request, config, sdf, t0, dt):
             graph.add(factor)
     rows = interval_problem(request, config, sdf, t0, dt).rows
     rng = np.random.default_rng(0)
-    unit = gtsam.noiseModel.Unit.Create(rows)
-    for i in range(n - 1):
-        # JacobianFactor has no four-key constructor in Python: stack a 3-key and a 1-key
-        # block of `rows` rows each into one four-key factor (2 x rows rows: a generous floor).
+    for first, end in chunk_bounds(config.support_states - 1, config.intervals_per_factor):
+        keys = chunk_keys(first, end)
+        # JacobianFactor has no many-key constructor in Python: stack parts of at most
+        # three keys, splitting the rows among them; the combined factor is dense over
+        # all keys with (end - first) * rows rows, like ours.
+        groups = [keys[i:i + 3] for i in range(0, len(keys), 3)]
         parts = gtsam.GaussianFactorGraph()
-        block = lambda: rng.normal(size=(rows, 2))  # noqa: E731
-        parts.add(gtsam.JacobianFactor(X(i), block(), V(i), block(), X(i + 1), block(), np.zeros(rows), unit))
-        parts.add(gtsam.JacobianFactor(V(i + 1), block(), np.zeros(rows), unit))
+        for group, m in zip(groups, np.diff(np.linspace(0, (end - first) * rows, len(groups) + 1).astype(int))):
+            terms = [x for key in group for x in (key, rng.normal(size=(m, 2)))]
+            parts.add(gtsam.JacobianFactor(*terms, np.zeros(m), gtsam.noiseModel.Unit.Create(m)))
         graph.add(gtsam.LinearContainerFactor(gtsam.JacobianFactor(parts)))
     return graph
 
 
-def per_iteration(graph, values, repeats):
-    lin_ms, _ = timed(lambda: graph.linearize(values), repeats)
-    err_ms, _ = timed(lambda: graph.error(values), repeats)
-    linear = graph.linearize(values)
-    solve_ms, _ = timed(lambda: linear.optimize(), repeats)
-    return lin_ms, err_ms, solve_ms
+def lm_iteration_ms(make_graph, values, lambda_initial, repeats):
+    """Median wall time of one Levenberg-Marquardt iteration (``iterate()``: linearise,
+    damped solve, error at the new point) from ``values``, on a fresh optimizer each time
+    (the constructor's error evaluation is not timed). Asserts that LM's first trial step
+    was accepted, so that ours and the floor time the same work."""
+    optimizers = [gtsam.LevenbergMarquardtOptimizer(make_graph(), values, lm_params(lambda_initial))
+                  for _ in range(repeats)]
+    times, _ = timed(lambda: optimizers.pop().iterate(), repeats)
+    return times
 
 
-def run(n_states: int, repeats: int) -> dict:
+def lm_params(lambda_initial):
+    params = gtsam.LevenbergMarquardtParams()
+    params.setlambdaInitial(lambda_initial)
+    params.setDiagonalDamping(True)
+    return params
+
+
+def accepting_lambda(graph, values, config):
+    """The planner's initial lambda, times 10 until LM accepts its first trial step from
+    ``values`` (a step's cost does not depend on lambda; a rejected one costs a retry)."""
+    lam = config.lambda_initial
+    while True:
+        optimizer = gtsam.LevenbergMarquardtOptimizer(graph, values, lm_params(lam))
+        optimizer.iterate()
+        if optimizer.lambda_() < lam:
+            return lam
+        lam *= 10.0
+
+
+def first_step_accepted(make_graph, values, lambda_initial):
+    optimizer = gtsam.LevenbergMarquardtOptimizer(make_graph(), values, lm_params(lambda_initial))
+    optimizer.iterate()
+    return optimizer.lambda_() < lambda_initial
+
+
+def queued(plans, count):
+    """``count`` peers: the crossing peers, then copies of them 2.5 s, 5 s, ... later --
+    cars queued behind them on their approaches (the intersection with queues)."""
+    return [dataclasses.replace(plans[i % len(plans)], t0=plans[i % len(plans)].t0 + 2.5 * (i // len(plans)))
+            for i in range(count)]
+
+
+def run(n_states: int, n_peers: int, repeats: int) -> dict:
     scenario = load_scenario("intersection")
     config = dataclasses.replace(scenario.planner, support_states=n_states, interp_checks=4)
     sdf = build_sdf(scenario.world)
     t_arrive = 12.0
-    peers = peer_plans(scenario, sdf, config, t_arrive)
+    peers = queued(peer_plans(scenario, sdf, config, t_arrive), n_peers)
     ego, peer = scenario.cars[0], scenario.cars[1]
     request = ego_request(scenario, peers, t_arrive, scenario.safety.epsilon_0(ego.radius_m, peer.radius_m))
     cold_ms, cold = timed(lambda: plan_trajectory(request, config, sdf), repeats)
 
     # Warm replans: every 0.2 s, from the previous plan's state.
-    warm_samples, iterations = [], []
+    warm_wall, warm_cpu, iterations = [], [], []
     plan = cold.plan
     for step in range(1, repeats + 1):
         t = 0.2 * step
         (p,), (v,) = plan.state_at(t)
         warm_request = dataclasses.replace(request, t_now=t, position=p, velocity=v, warm_start=plan)
-        result = plan_trajectory(warm_request, config, sdf)
-        warm_samples.append(result.time_ms)
+        (wall, cpu), result = timed(lambda: plan_trajectory(warm_request, config, sdf), 1)  # noqa: B023
+        warm_wall.append(wall)
+        warm_cpu.append(cpu)
         iterations.append(result.iterations)
         plan = result.plan
 
-    # Per-iteration cost of our graph and of the native floor, at the cold solution.
-    t0, dt = 0.0, (t_arrive - 0.0) / (n_states - 1)
+    # One LM iteration of our graph and of the native floor, from the seeded route at
+    # full resolution, where LM's first step is accepted in both.
+    t0, dt = 0.0, t_arrive / (n_states - 1)
+    start = seed_plan(request, t0, dt, n_states)
     values = gtsam.Values()
     for i in range(n_states):
-        values.insert(X(i), cold.plan.positions[i])
-        values.insert(V(i), cold.plan.velocities[i])
-    ours = per_iteration(build_graph(request, config, sdf, t0, dt), values, repeats * 5)
-    floor = per_iteration(native_floor_graph(request, config, sdf, t0, dt), values, repeats * 5)
-    return {
-        "N": n_states,
-        "cold_ms": cold_ms,
-        "cold_iterations": cold.iterations,
-        "warm_ms": statistics.median(warm_samples),
-        "warm_iterations": statistics.median(iterations),
-        "ours_iter_ms": sum(ours),
-        "floor_iter_ms": sum(floor),
-        "ours_parts": ours,
-        "floor_parts": floor,
-    }
+        values.insert(X(i), start.positions[i])
+        values.insert(V(i), start.velocities[i])
+    lam = accepting_lambda(build_graph(request, config, sdf, t0, dt), values, config)
+    ours_graph = lambda: build_graph(request, config, sdf, t0, dt)  # noqa: E731
+    floor_graph = lambda: native_floor_graph(request, config, sdf, t0, dt)  # noqa: E731
+    assert first_step_accepted(ours_graph, values, lam) and first_step_accepted(floor_graph, values, lam)
+    ours = lm_iteration_ms(ours_graph, values, lam, repeats * 4)
+    floor = lm_iteration_ms(floor_graph, values, lam, repeats * 4)
+    return {"N": n_states, "peers": n_peers, "left_out": cold.peers_out_of_reach, "cold_ms": cold_ms,
+            "cold_iterations": cold.iterations, "warm_ms": (statistics.median(warm_wall), statistics.median(warm_cpu)),
+            "warm_iterations": statistics.median(iterations), "ours_iter_ms": ours, "floor_iter_ms": floor}
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--repeats", type=int, default=15)
     args = parser.parse_args()
-    print("planner benchmark: one car, 3 peers, 4 interpolated checks per interval (medians)")
-    print(f"{'N':>3} {'cold ms':>8} {'(iters)':>7} {'warm ms':>8} {'(iters)':>7} "
-          f"{'iter ms':>8} {'floor ms':>9} {'x floor':>8}   ours lin/err/solve | floor lin/err/solve")
-    for n in (21, 41):
-        r = run(n, args.repeats)
-        ours = "/".join(f"{x:.2f}" for x in r["ours_parts"])
-        floor = "/".join(f"{x:.2f}" for x in r["floor_parts"])
-        print(f"{r['N']:>3} {r['cold_ms']:>8.1f} {r['cold_iterations']:>7} {r['warm_ms']:>8.1f} "
-              f"{r['warm_iterations']:>7.0f} {r['ours_iter_ms']:>8.2f} {r['floor_iter_ms']:>9.2f} "
-              f"{r['ours_iter_ms'] / r['floor_iter_ms']:>8.1f}   {ours} | {floor}")
+    print("planner benchmark: one car, 4 interpolated checks per interval; medians, wall / CPU ms")
+    print(f"{'N':>3} {'peers':>5} {'(out)':>5} {'cold':>11} {'(iters)':>7} {'warm':>9} {'(iters)':>7} "
+          f"{'LM iteration':>12} {'floor':>9} {'x floor':>11}")
+    for n, peers in ((21, 3), (41, 3), (41, 15)):
+        r = run(n, peers, args.repeats)
+        pair = lambda x, f: f"{x[0]:{f}}/{x[1]:{f}}"  # noqa: E731
+        ratio = (r["ours_iter_ms"][0] / r["floor_iter_ms"][0], r["ours_iter_ms"][1] / r["floor_iter_ms"][1])
+        print(f"{r['N']:>3} {r['peers']:>5} {r['left_out']:>5} {pair(r['cold_ms'], '.1f'):>11} "
+              f"{r['cold_iterations']:>7} {pair(r['warm_ms'], '.1f'):>9} {r['warm_iterations']:>7.0f} "
+              f"{pair(r['ours_iter_ms'], '.2f'):>12} {pair(r['floor_iter_ms'], '.2f'):>9} {pair(ratio, '.2f'):>11}")
 
 
 if __name__ == "__main__":

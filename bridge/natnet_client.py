@@ -31,8 +31,18 @@ Modes (``NatNetClientOptions.multicast``):
   SO_REUSEPORT sockets). When nothing arrives for ``reconnect_after_s``, CONNECT is sent
   again (a restarted server forgets its clients).
 
-CONNECT announces the client as NatNet 4.1 (the newest layout the codec knows) and, if
-``requested_version`` is set, asks for that bitstream version in the connection options.
+Version negotiation: CONNECT announces the client as NatNet 4.2 (the newest layout the
+codec knows, ``natnet.NEWEST_LAYOUT``) and, if ``requested_version`` is set, asks for that
+bitstream version in the connection options (NatNet 4 servers honour it). The client then
+decodes what SERVERINFO says the server streams -- 2.x, 3.0, 3.1, 4.0 to 4.4 (4.3 and 4.4
+with the 4.2 layout, as the SDK's own depacketizer does) -- unless ``natnet_version`` pins
+a layout; anything newer is a clear :class:`NatNetConnectionError`, never a guess. A
+SERVERINFO arriving later (a restarted or reconfigured server) switches the layout.
+
+Model definitions: after the handshake the client asks for MODELDEF (REQUEST_MODELDEF on
+the command socket) and keeps the rigid bodies' names and ids (:meth:`NatNetClient.body_ids`,
+``name -> id``, so a config can name bodies); in unicast it asks again when a frame says the
+tracked models changed. Without an answer the client still streams; the model stays empty.
 
 One thread owns the receiving socket; the handshake runs before it starts, in the caller.
 Sockets always have timeouts, so ``close()`` stops and joins within a bounded time.
@@ -174,15 +184,18 @@ class NatNetClient:
             raise RuntimeError("NatNetClient already started")
         o = self.options
         try:
+            model_packet = None
             if o.multicast:
                 if o.handshake:
                     with self._command_socket() as cmd:
                         self._server_info = self._handshake(cmd)
+                        model_packet = self._model_definitions(cmd)
                 self._sock = self._multicast_socket()
             else:
                 self._sock = self._command_socket()
                 try:
                     self._server_info = self._handshake(self._sock)
+                    self._sock.sendto(natnet.serialize(natnet.RequestModelDef()), self._server)
                 except BaseException:
                     self._sock.close()
                     self._sock = None
@@ -195,6 +208,8 @@ class NatNetClient:
         self._receiver = FrameReceiver(version, self._on_frame, pinned=o.natnet_version is not None,
                                        restart_threshold=o.frame_restart_threshold)
         self._receiver.server_info = self._server_info
+        if model_packet is not None:
+            self._receiver.handle(model_packet, time.monotonic())
         self._stop.clear()
         self._thread = threading.Thread(target=self._run, name="natnet-client", daemon=True)
         self._thread.start()
@@ -236,6 +251,15 @@ class NatNetClient:
     def local_address(self) -> tuple[str, int] | None:
         sock = self._sock
         return sock.getsockname() if sock is not None else None
+
+    @property
+    def model(self) -> natnet.ModelDef | None:
+        """The server's latest model definitions (None before MODELDEF arrived)."""
+        return self._receiver.model if self._receiver else None
+
+    def body_ids(self) -> dict[str, int]:
+        """Rigid-body name -> id as Motive names them (empty before MODELDEF arrived)."""
+        return self._receiver.body_ids() if self._receiver else {}
 
     def latest(self, body_id: int) -> BodySample | None:
         return self._receiver.latest(body_id) if self._receiver else None
@@ -289,7 +313,7 @@ class NatNetClient:
 
     def _connect_packet(self) -> bytes:
         o = self.options
-        return natnet.serialize(ConnectRequest(o.client_name, Version(0, 1), natnet.V4_1,
+        return natnet.serialize(ConnectRequest(o.client_name, Version(0, 1), natnet.NEWEST_LAYOUT,
                                                requested_version=o.requested_version))
 
     def _handshake(self, sock: socket.socket) -> ServerInfo:
@@ -330,6 +354,22 @@ class NatNetClient:
                      info.natnet_version)
             return info
 
+    def _model_definitions(self, sock: socket.socket) -> bytes | None:
+        """Ask for MODELDEF on the command socket and wait (briefly) for it; None if none came."""
+        sock.sendto(natnet.serialize(natnet.RequestModelDef()), self._server)
+        deadline = time.monotonic() + min(1.0, self.options.connect_timeout_s)
+        while (left := deadline - time.monotonic()) > 0:
+            sock.settimeout(left)
+            try:
+                data, _ = sock.recvfrom(_RECV_BYTES)
+            except (socket.timeout, OSError):
+                continue
+            if natnet.peek_message_id(data) == MessageId.MODELDEF:
+                sock.settimeout(self.options.poll_timeout_s)
+                return data
+        log.warning("NatNet: no MODELDEF from the server; rigid bodies are known by id only")
+        return None
+
     def _check_mode(self, info: ServerInfo) -> None:
         c, o = info.connection, self.options
         if c is None:
@@ -356,8 +396,9 @@ class NatNetClient:
         if not supports_frames(version):
             self._close_quietly()
             raise NatNetConnectionError(
-                f"NatNet {version} frames are not supported (2.x, 3.0, 3.1, 4.0, 4.1 are); "
-                "set natnet_version or requested_version")
+                f"NatNet {version} frames are not supported (2.x, 3.0, 3.1 and 4.0 to "
+                f"{natnet.LATEST_DECODED.major}.{natnet.LATEST_DECODED.minor} are); set natnet_version or "
+                "requested_version")
         return version
 
     def _close_quietly(self) -> None:
@@ -374,6 +415,7 @@ class NatNetClient:
         connect = self._connect_packet()
         now = time.monotonic()
         next_keepalive = now + o.keepalive_interval_s
+        next_model = now
         last_rx = now
         while not self._stop.is_set():
             try:
@@ -395,6 +437,9 @@ class NatNetClient:
                     log.exception("NatNet client: failed to handle a datagram")
             if unicast:
                 try:
+                    if receiver.models_changed and now >= next_model:  # Motive's models changed
+                        sock.sendto(natnet.serialize(natnet.RequestModelDef()), self._server)
+                        next_model = now + 1.0
                     if now >= next_keepalive:
                         sock.sendto(keepalive, self._server)
                         next_keepalive = now + o.keepalive_interval_s

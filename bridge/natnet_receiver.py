@@ -5,7 +5,8 @@ rigid body out.
 feeds it from its socket thread, and tests drive it with captured bytes. It decodes (with
 the pure codec in :mod:`bridge.natnet`), counts (received, decoded, rejected by reason,
 frames dropped by gaps in frame numbers, stale/out-of-order), keeps a latest-value slot
-per rigid body id and calls an optional ``on_frame`` callback.
+per rigid body id, keeps the latest model definitions (MODELDEF: rigid bodies' names and
+ids) and calls an optional ``on_frame`` callback.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from types import MappingProxyType
 from typing import Callable, Mapping
 
 from . import natnet
-from .natnet import Frame, MessageId, NatNetError, RigidBody, ServerInfo, Version, supports_frames
+from .natnet import Frame, MessageId, ModelDef, NatNetError, RigidBody, ServerInfo, Version, supports_frames
 
 __all__ = ["FrameReceiver", "BodySample", "NatNetStats"]
 
@@ -74,6 +75,10 @@ class FrameReceiver:
         self._callback_errors = 0
         self._last_frame: int | None = None
         self.server_info: ServerInfo | None = None
+        self.model: ModelDef | None = None
+        """The latest MODELDEF (model definitions), None before one arrived."""
+        self.models_changed = False
+        """Set when a frame says Motive's tracked models changed (ask for MODELDEF again)."""
 
     @property
     def version(self) -> Version | None:
@@ -108,6 +113,16 @@ class FrameReceiver:
     def _handle_other(self, message_id: int, payload: memoryview) -> None:
         with self._cond:
             self._other += 1
+        if message_id == MessageId.MODELDEF:
+            if self._version is None:
+                raise NatNetError("MODELDEF before the NatNet version is known", "no_version")
+            model = natnet.decode_model_def(payload, self._version)
+            with self._cond:
+                self.model = model
+                self.models_changed = False
+            log.info("NatNet model: rigid bodies %s",
+                     ", ".join(f"{d.name!r}={d.id}" for d in model.rigid_bodies) or "none")
+            return
         if message_id == MessageId.SERVERINFO:
             info = natnet.decode_server_info(payload)
             self.server_info = info
@@ -138,10 +153,18 @@ class FrameReceiver:
                     log.info("NatNet frame numbers restarted (%d after %d)", number, last)
             self._last_frame = number
             self._decoded += 1
+            if frame.tracked_models_changed:
+                self.models_changed = True
             for body in frame.rigid_bodies:
                 self._latest[body.id] = BodySample(body, number, frame.timestamp, received_s)
             self._cond.notify_all()
         return True
+
+    def body_ids(self) -> dict[str, int]:
+        """Rigid-body name -> id, from the latest MODELDEF (empty before one arrived)."""
+        with self._cond:
+            model = self.model
+        return {d.name: d.id for d in model.rigid_bodies} if model is not None else {}
 
     def latest(self, body_id: int) -> BodySample | None:
         with self._cond:

@@ -52,7 +52,8 @@ def zenoh_config(bus: BusConfig, extra_listen: tuple[str, ...] = ()) -> zenoh.Co
             raise BusError(f"bad Zenoh configuration in bus.zenoh_config {bus.zenoh_config}: {_said(exc)}") from exc
         default = BusConfig()
         for path, field_name in (("mode", "mode"), ("scouting/multicast/enabled", "multicast_scouting"),
-                                 ("scouting/multicast/interface", "multicast_interface")):
+                                 ("scouting/multicast/interface", "multicast_interface"),
+                                 ("transport/unicast/max_links", "max_links")):
             ours = getattr(bus, field_name)
             theirs = _get(config, path) if bus.zenoh_config else None
             if theirs is None:
@@ -139,6 +140,7 @@ class FleetBus:
         """Liveliness of every car process seen: True while its token is up."""
         self._session: zenoh.Session | None = None
         self._publishers: dict[str, object] = {}
+        self._reliable_plan = None
         self._entities: list = []
 
     # --- lifecycle -------------------------------------------------------------------------
@@ -166,7 +168,17 @@ class FleetBus:
                      ", ".join(listening))
         if self.car_id is not None:
             cid = self.car_id
-            self._publishers["plan"] = zext.declare_advanced_publisher(
+            # Plans go two ways. Best effort (on a UDP link, ``?rel=0``, where the peers have
+            # one), repeated every control.plan_period_s: a lost plan is replaced by the next
+            # instead of retransmitted, which over TCP at heavy loss held every later plan back
+            # for seconds. And reliable, each new plan once, through an advanced publisher with
+            # a cache of 1: late joiners and peers back from a partition get the latest at once
+            # (the best-effort path alone took seconds to resume). Whichever copy arrives first
+            # is taken; the other is dropped by the Inbox as a repeat of its sequence number.
+            self._publishers["plan"] = session.declare_publisher(
+                key(fleet, cid, "plan"), reliability=zenoh.Reliability.BEST_EFFORT, express=True,
+                congestion_control=zenoh.CongestionControl.DROP)
+            self._reliable_plan = zext.declare_advanced_publisher(
                 session, key(fleet, cid, "plan"), cache=zext.CacheConfig(max_samples=1),
                 publisher_detection=True, sample_miss_detection=zext.MissDetectionConfig(heartbeat=0.5),
                 reliability=zenoh.Reliability.RELIABLE, congestion_control=zenoh.CongestionControl.DROP)
@@ -214,9 +226,11 @@ class FleetBus:
         session, self._session = self._session, None
         if session is None:
             return
-        entities = [*self._entities, *self._publishers.values()]
+        entities = [*self._entities, *self._publishers.values(),
+                    *([self._reliable_plan] if self._reliable_plan is not None else [])]
         self._entities.clear()
         self._publishers.clear()
+        self._reliable_plan = None
 
         def close_all() -> None:
             for entity in entities:
@@ -236,15 +250,25 @@ class FleetBus:
             self.counters["close_timed_out"] += 1
             log.warning("the Zenoh session did not close within %.1f s; leaving it to the OS", timeout_s)
 
+    def links(self) -> list[tuple[str, str, bool]]:
+        """(local, remote, reliable) of every Zenoh link this session has now."""
+        if self._session is None:
+            return []
+        return [(str(link.src), str(link.dst), link.reliability == zenoh.Reliability.RELIABLE)
+                for link in self._session.info.links()]
+
     # --- sending ---------------------------------------------------------------------------
 
-    def publish(self, kind: str, payload: bytes) -> None:
-        """Publish one of our own messages (kind in KINDS, or the operator's for an observer)."""
+    def publish(self, kind: str, payload: bytes, *, repeat: bool = False) -> None:
+        """Publish one of our own messages (kind in KINDS, or the operator's for an observer).
+        A new plan goes best effort and reliably; a ``repeat`` of the latest, best effort only."""
         publisher = self._publishers.get(kind)
         if publisher is None:
             raise BusError(f"this bus cannot publish {kind!r} (car_id={self.car_id})")
         try:
             publisher.put(payload)
+            if kind == "plan" and not repeat and self._reliable_plan is not None:
+                self._reliable_plan.put(payload)
             self.counters[f"sent_{kind}"] += 1
         except Exception as exc:  # a closed session or a full queue must not kill the loop
             self.counters[f"send_failed_{kind}"] += 1

@@ -58,13 +58,14 @@ from ..agent.operation import Mode, Operation
 from ..agent.scenario_files import load_scenario
 from ..agent.world import build_sdf
 from ..bridge import natnet
-from ..bridge.carlink import Answer, CommandSender, Flags, open_sender
+from ..bridge.carlink import SOURCE_CAR_PROCESS, Answer, CommandSender, Flags, link_key
 from ..bridge.guard import speed_cap
 from ..bridge.natnet_client import NatNetClient, NatNetConnectionError, client_options
 from ..bridge.tracking import track
 from .bus import BusError, FleetBus, Received, zenoh_config
-from .car_report import ControlStats, WaitingLog, waiting_for, write_stats
+from .car_report import ControlStats, WaitingLog, status_counters, waiting_for, write_stats
 from .command import command_parser, configured, stop_on_signals
+from .laps import Laps
 from .ticker import ticks
 
 log = logging.getLogger(__name__)
@@ -89,6 +90,7 @@ class CarProcess:
         self.car = car
         self.clock = clock
         self.natnet = client_options(scenario.natnet)
+        link_key(car)  # a missing or bad key is a config error now, not when driving
         self.stop = threading.Event()
         self.sdf = build_sdf(scenario.world)
         self.agent = self._new_agent()
@@ -111,6 +113,7 @@ class CarProcess:
         self._alive: dict[int, bool] = {}
         self.stuck = False
         self._motion: deque = deque()  # (t, x, y, commanded v) of the control loop
+        self.laps = Laps(car, scenario.control.laps, scenario.control.lap_turn_s)
 
     def _new_agent(self) -> CarAgent:
         """A fresh mind: a car starts every trial from what it sees, not from the last one."""
@@ -179,6 +182,7 @@ class CarProcess:
             for plan, at in self._last_plans.values():  # what the peers intend, as last heard
                 agent.receive(plan, at)
             self.agent = agent
+            self.laps = Laps(self.car, self.scenario.control.laps, self.scenario.control.lap_turn_s)
             self.stuck = False
             self._motion.clear()
         log.info("car %d: trial %d: start at %.2f (in %.2f s), cruise %.2f m/s", self.car.id,
@@ -215,7 +219,7 @@ class CarProcess:
         self.control.started = time.monotonic()
         next_ping = self.control.started
         for deadline, now_mono in ticks(1.0 / self.scenario.control.command_rate_hz, self.stop):
-            self.control.late_ms.append(max(0.0, now_mono - deadline) * 1e3)
+            self.control.add(max(0.0, now_mono - deadline) * 1e3, int(60 * self.scenario.control.command_rate_hz))
             try:
                 self._command(sender)
                 if now_mono >= next_ping:
@@ -245,13 +249,18 @@ class CarProcess:
         with self._operation_lock:
             if self.operation.check_deadman(now):
                 log.warning("car %d: %s", self.car.id, self.operation.reason)
-            drive = self.operation.may_drive(now) and not self.agent.at_goal
+            may_drive = self.operation.may_drive(now)
             link = self.operation.next_flags(now)
+        drive = may_drive and not self.agent.at_goal
         flags = Flags.E_STOP if link.e_stop else Flags.RELEASE if link.release else Flags.NONE
+        turn = pose and may_drive and not link.e_stop and self.laps.turn_command(
+            now, pose[2], self.scenario.tracking, self.scenario.vehicle)
         if pose is None:
             self.control.stale_pose_stops += 1
             self.control.stops += 1
             sender.send(0.0, 0.0, Flags.STOP | flags)
+        elif turn:  # between laps: turning in place towards the next leg
+            sender.send(*turn, flags)
         elif plan is None or not drive or link.e_stop:
             self.control.stops += 1
             sender.send(0.0, 0.0, Flags.STOP | flags)
@@ -291,8 +300,9 @@ class CarProcess:
     def run(self, stats_path: Path | None = None) -> int:
         scenario, car = self.scenario, self.car
         sys.setswitchinterval(SWITCH_INTERVAL_S)
-        log.info("car %d: NatNet %s at %s, link %s", car.id, scenario.natnet.mode, scenario.natnet.server, car.link)
-        with open_sender(car, stamp_clock=self.clock) as sender:
+        log.info("car %d: NatNet %s at %s, link %s (version %d)", car.id, scenario.natnet.mode, scenario.natnet.server,
+                 car.link, car.link_version)
+        with CommandSender.for_car(car, source=SOURCE_CAR_PROCESS, stamp_clock=self.clock) as sender:
             controller = threading.Thread(target=self._control_loop, args=(sender,), name=f"control-{car.id}",
                                           daemon=True)
             controller.start()  # STOP to the car from now on, whatever else is not up yet
@@ -366,7 +376,7 @@ class CarProcess:
         control = self.scenario.control
         started_wait = self.clock()
         now = self.clock()
-        next_replan = now
+        next_replan = next_plan = now
         next_trust = now + control.trust_report_period_s * (self.car.id % 7) / 7
         next_pose = now
         next_status = now
@@ -391,13 +401,11 @@ class CarProcess:
                 if now - next_replan > control.replan_period_s:
                     next_replan = now + control.replan_period_s  # do not try to catch up
                 self._replan(now)
-                outgoing = self.agent.plan_message(now)
-                own = self.agent.tracks.get(self.car.id)
-                motion = own.motion() if own else None
-                if outgoing is not None and self.stuck and motion is not None:  # the truth: standing still
-                    outgoing = dataclasses.replace(outgoing, plan=standing(motion.position, now))
-                if outgoing is not None:
-                    bus.publish("plan", messages.encode(outgoing))
+                next_plan = now + control.plan_period_s
+                self._publish_plan(bus, now, repeat=False)  # a new plan goes out at once, both ways
+            if now >= next_plan:  # and again every plan_period_s, best effort: a lost plan is soon replaced
+                next_plan = max(next_plan + control.plan_period_s, now)
+                self._publish_plan(bus, now, repeat=True)
             if now >= next_trust:
                 next_trust = max(next_trust + control.trust_report_period_s, now)
                 bus.publish("trust", messages.encode(self.agent.trust_message(now)))
@@ -432,11 +440,30 @@ class CarProcess:
             except Exception:  # keep the last plan; the car keeps tracking it
                 log.exception("car %d: replanning raised", self.car.id)
                 self.counters["replan_errors"] += 1
-            if self.agent.at_goal:
-                with self._operation_lock:
-                    self.operation.arrived()
-                log.info("car %d: %s", self.car.id, self.operation.reason)
+        own = self.agent.tracks.get(self.car.id)
+        motion = own.motion() if own else None
+        if self.operation.mode == Mode.DRIVING and motion is not None \
+                and self.laps.advance(self.agent, tuple(motion.position), now):
+            log.info("car %d: lap %d of %d", self.car.id, self.laps.lap, self.laps.laps)
+        if self.operation.mode == Mode.DRIVING and self.arrived:
+            with self._operation_lock:
+                self.operation.arrived()
+            log.info("car %d: %s", self.car.id, self.operation.reason)
         self._plan = self.agent.plan
+
+    @property
+    def arrived(self) -> bool:
+        """At the goal of the last lap."""
+        return self.agent.at_goal and self.laps.done
+
+    def _publish_plan(self, bus: FleetBus, now: float, repeat: bool) -> None:
+        outgoing = self.agent.plan_message(now)
+        own = self.agent.tracks.get(self.car.id)
+        motion = own.motion() if own else None
+        if outgoing is not None and self.stuck and motion is not None:  # the truth: standing still
+            outgoing = dataclasses.replace(outgoing, plan=standing(motion.position, now))
+        if outgoing is not None:
+            bus.publish("plan", messages.encode(outgoing), repeat=repeat)
 
     def _publish_pose(self, bus: FleetBus, now: float) -> None:
         pose = self._own_pose()
@@ -448,22 +475,11 @@ class CarProcess:
     def _publish_status(self, bus: FleetBus) -> None:
         self._seq["status"] += 1
         last = self.agent.last_result
-        counters = {k: v for k, v in (self.agent.counters | self.counters).items()}
-        counters |= {f"inbox_{k}": v for k, v in self.inbox.dropped.items()}
-        counters["commands_sent"] = self.control.sent
-        counters["stale_pose_stops"] = self.control.stale_pose_stops
-        counters["guard_limited"] = self.control.guard_limited
-        now = self.clock()
-        for peer, view in self.agent.peers.items():  # how fresh each peer's plan is, for resync checks
-            counters[f"plan_age_ms_{peer}"] = int(min(1e9, max(0.0, now - view.accepted_received) * 1e3))
-        # the car link, as the car's answers tell (trustfg check reads these)
-        counters["link_answer_age_ms"] = int(min(1e9, max(0.0, now - self._link_answered) * 1e3))
-        counters["link_e_stop_latched"] = int(self._car_latched)
-        first = ("plan_age", "link_")
         bus.publish("status", messages.encode(messages.StatusMessage(
             self.car.id, self._seq["status"], self.clock(), self.state,
-            last.time_ms if last else 0.0, last.iterations if last else 0, self.agent.at_goal,
-            dict(sorted(counters.items(), key=lambda kv: not kv[0].startswith(first))[:64]), self.operation.trial)))
+            last.time_ms if last else 0.0, last.iterations if last else 0, self.arrived,
+            status_counters(self, self.clock()), self.operation.trial)))
+
 
 def main(argv: list[str] | None = None) -> int:
     parser = command_parser("trustfg car", __doc__.split("\n")[0])

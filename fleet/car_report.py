@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import itertools
 import json
 import logging
 import math
@@ -31,8 +32,18 @@ class ControlStats:
     """Ticks whose forward speed the proximity guard lowered (bridge.guard)."""
     late_ms: deque = field(default_factory=lambda: deque(maxlen=100_000))
     """Lateness of the latest ticks (bounded: a lab run may last hours)."""
+    late_p99_by_minute: deque = field(default_factory=lambda: deque(maxlen=24 * 60))
+    """p99 lateness of every minute of ticks, ms (does the timing hold over hours?)."""
+    ticks: int = 0
     started: float = 0.0
     stopped: float = 0.0
+
+    def add(self, late_ms: float, per_minute: int) -> None:
+        self.late_ms.append(late_ms)
+        self.ticks += 1
+        if self.ticks % per_minute == 0:
+            minute = list(itertools.islice(reversed(self.late_ms), per_minute))
+            self.late_p99_by_minute.append(round(float(np.percentile(minute, 99)), 3))
 
     def summary(self) -> dict:
         elapsed = max(self.stopped - self.started, 1e-9)
@@ -43,6 +54,7 @@ class ControlStats:
             "jitter_ms_p50": round(float(np.percentile(late, 50)), 3),
             "jitter_ms_p99": round(float(np.percentile(late, 99)), 3),
             "jitter_ms_max": round(float(np.max(late)), 3),
+            "late_ms_p99_by_minute": list(self.late_p99_by_minute),
         }
 
 
@@ -90,6 +102,24 @@ class WaitingLog:
             log.info("car %d (%s): everything is up", self.car_id, state)
 
 
+def status_counters(process: Any, now: float) -> dict[str, int]:
+    """The counters a car process's status message carries (at most 64: the plan ages and
+    the car link's first, which resync checks and ``trustfg check`` read)."""
+    counters = dict(process.agent.counters | process.counters)
+    counters |= {f"inbox_{k}": v for k, v in process.inbox.dropped.items()}
+    counters["commands_sent"] = process.control.sent
+    counters["stale_pose_stops"] = process.control.stale_pose_stops
+    counters["guard_limited"] = process.control.guard_limited
+    counters["lap"] = process.laps.lap
+    for peer, view in process.agent.peers.items():  # how fresh each peer's plan is
+        counters[f"plan_age_ms_{peer}"] = int(min(1e9, max(0.0, now - view.accepted_received) * 1e3))
+    # the car link, as the car's answers tell
+    counters["link_answer_age_ms"] = int(min(1e9, max(0.0, now - process._link_answered) * 1e3))
+    counters["link_e_stop_latched"] = int(process._car_latched)
+    first = ("plan_age", "link_")
+    return dict(sorted(counters.items(), key=lambda kv: not kv[0].startswith(first))[:64])
+
+
 def write_stats(path: Path, process: Any, bus: FleetBus | None, sender: CommandSender) -> None:
     """The ``--stats`` JSON summary of a car process (fleet.car_process.CarProcess), at its exit."""
     nat = process._natnet.stats() if process._natnet is not None else None
@@ -98,7 +128,7 @@ def write_stats(path: Path, process: Any, bus: FleetBus | None, sender: CommandS
         "car_id": process.car.id,
         "state": process.state,
         "trial": process.operation.trial,
-        "at_goal": agent.at_goal,
+        "at_goal": process.arrived,
         "replan_ms": [round(x, 3) for x in agent.replan_ms],
         "control": process.control.summary(),
         "agent": dict(agent.counters),

@@ -2,6 +2,7 @@
 
     trustfg experiment {proximity,consistency,transparency,lab,all} [--seed N] [--seeds K]
                        [--out DIR] [--jobs J]
+    trustfg experiment bank ...        (the scenario bank and its baselines: fleet.bank)
 
 writes DIR/<name>/metrics.json and PNG figures and prints a table. metrics.json is
 
@@ -59,6 +60,8 @@ def with_liar(scenario: Scenario, liar: int = LIAR_ID, p: float = LIAR_MISINFORM
 
 ALL_ON = dict(proximity=True, consistency=True, transparency=True)
 ALL_OFF = dict(proximity=False, consistency=False, transparency=False)
+NO_TRUST = dict(proximity=True, consistency=False, transparency=False)
+"""The fair "off": avoidance without trust, the proximity hinge at eps_0 from every peer."""
 
 
 @dataclass(frozen=True)
@@ -72,8 +75,10 @@ class Experiment:
 EXPERIMENTS = {
     "proximity": Experiment(
         "proximity", "intersection",
-        {"on": functools.partial(factors, **ALL_ON), "off": functools.partial(factors, **ALL_OFF)},
-        "Do the trust factors prevent proximity breaches on conflicting routes?"),
+        {"on": functools.partial(factors, **ALL_ON), "fixed": functools.partial(factors, **NO_TRUST),
+         "off": functools.partial(factors, **ALL_OFF)},
+        "Do the trust factors prevent proximity breaches on conflicting routes? (fixed: no trust factors, "
+        "eps_0 from every peer; off: no avoidance)"),
     "consistency": Experiment(
         "consistency", "intersection",
         {"on": functools.partial(factors, **ALL_ON),
@@ -293,8 +298,17 @@ class Progress:
 # --- command line ------------------------------------------------------------------------------
 
 
+OTHER_EXPERIMENTS = {"bank": "trustfg.fleet.bank"}
+"""Experiments with their own command line (``trustfg experiment bank --help``), not in "all"."""
+
+
 def main(argv: list[str] | None = None) -> int:
-    parser = command_parser("trustfg experiment", __doc__)
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] in OTHER_EXPERIMENTS:
+        import importlib
+        return importlib.import_module(OTHER_EXPERIMENTS[argv[0]]).main(argv[1:])
+    parser = command_parser("trustfg experiment", __doc__,
+                            epilog=f"also: {', '.join(OTHER_EXPERIMENTS)} (see 'trustfg experiment bank --help')")
     parser.add_argument("name", choices=[*EXPERIMENTS, "all"])
     parser.add_argument("--seed", type=int, default=0, help="first seed (default 0)")
     parser.add_argument("--seeds", type=int, default=20, help="number of seeds (default 20)")

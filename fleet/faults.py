@@ -30,6 +30,8 @@ Measured per run, from mocap-sim's ground truth and the recorded messages:
                       plan younger than 1 s from every peer: plans resynchronised
     honest_trust_min  least trust any car still reports in any peer at the end: silence
                       and loss must not read as lying
+    plan_age_ms       how old each car's view of each peer's plan is (status counters
+                      plan_age_ms_<peer>, every status after the go): p50 and p99
     wall_clearance_m  least distance from a car's edge to a building (negative: into it)
 """
 
@@ -46,6 +48,8 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
+
+import numpy as np
 
 from ..agent.scenario_files import load_scenario
 from . import netem
@@ -188,7 +192,24 @@ def measure(case: Case, summary: dict, out: Path) -> dict:
         row["time_to_stop_s"] = _time_to_stop(out / "commands.csv", VICTIM, t_go + fault)
     if case.measures_recovery and heal is not None and t_go is not None:
         row["time_to_recover_s"] = _time_to_recover(out / "messages.jsonl", ids, t_go + heal)
+    row["plan_age_ms_p50"], row["plan_age_ms_p99"] = plan_age_percentiles(out / "messages.jsonl", t_go)
     return row
+
+
+def plan_age_percentiles(messages_path: Path, since: float | None) -> tuple[float | None, float | None]:
+    """p50 and p99 of every plan age (ms) the cars' statuses report after ``since``."""
+    ages = []
+    with open(messages_path) as f:
+        for line in f:
+            if '"status"' not in line:
+                continue
+            record = json.loads(line)
+            if record.get("kind") != "status" or "message" not in record or (since and record["t"] < since):
+                continue
+            ages += [v for k, v in record["message"]["counters"].items() if k.startswith("plan_age_ms_")]
+    if not ages:
+        return None, None
+    return float(np.percentile(ages, 50)), float(np.percentile(ages, 99))
 
 
 def _t_go(out: Path) -> float | None:
@@ -230,17 +251,21 @@ def _time_to_recover(messages_path: Path, ids: list[int], heal: float) -> float 
 
 
 def table(rows: list[dict]) -> str:
-    """fault, runs, breaches, goals reached, max time to stop, max time to recover."""
+    """fault, runs, breaches, goals reached, max time to stop, max time to recover, least trust,
+    least wall clearance, plan age (median of the runs' p50, largest of their p99), crashed."""
     by_case: dict[str, list[dict]] = {}
     for row in rows:
         by_case.setdefault(row["case"], []).append(row)
     lines = ["| fault | runs | breaches | goals reached | max time to stop (s) | max time to recover (s) "
-             "| least trust reported | least wall clearance (m) | crashed |",
-             "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+             "| least trust reported | least wall clearance (m) | plan age p50 / p99 (ms) | crashed |",
+             "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
     for name, group in by_case.items():
         stops = [r["time_to_stop_s"] for r in group if r["time_to_stop_s"] is not None]
         recovers = [r["time_to_recover_s"] for r in group]
         trust = [r["honest_trust_min"] for r in group if r["honest_trust_min"] is not None]
+        p50 = [r["plan_age_ms_p50"] for r in group if r.get("plan_age_ms_p50") is not None]
+        p99 = [r["plan_age_ms_p99"] for r in group if r.get("plan_age_ms_p99") is not None]
+        age = f"{np.median(p50):.0f} / {max(p99):.0f}" if p99 else "-"
         if not CASES[name].measures_recovery:
             recover = "-"
         else:
@@ -249,7 +274,7 @@ def table(rows: list[dict]) -> str:
                  f"{sum(r['goals'] for r in group)}/{sum(r['cars'] for r in group)}",
                  f"{max(stops):.3f}" if stops else "-", recover,
                  f"{min(trust):.2f}" if trust else "-", f"{min(r['wall_clearance_m'] for r in group):.3f}",
-                 sum(len(r["crashed"]) for r in group)]
+                 age, sum(len(r["crashed"]) for r in group)]
         lines.append("| " + " | ".join(map(str, cells)) + " |")
     return "\n".join(lines)
 

@@ -2,8 +2,10 @@
 
 Keys (F the fleet, N the car id):
 
-    trustfg/F/N/plan     Plan         reliable; AdvancedPublisher with a cache of 1, so a
-                                      car that joins late gets every peer's latest plan
+    trustfg/F/N/plan     Plan         best effort, express, every control.plan_period_s (on
+                                      a UDP link where there is one), and each new plan
+                                      also reliably (AdvancedPublisher, cache of 1: late
+                                      joiners get the latest at once)
     trustfg/F/N/trust    TrustReport  reliable
     trustfg/F/N/pose     Pose         best effort, express
     trustfg/F/N/status   Status       best effort
@@ -18,7 +20,7 @@ Keys (F the fleet, N the car id):
 
 Only the operator may put start, stop and heartbeat (fleet.security).
 
-Advanced publishers and subscribers add Zenoh's own machinery under ``<key>/@adv/...``;
+Advanced publishers and subscribers (plans, the start) add Zenoh's own machinery under ``<key>/@adv/...``;
 access control (fleet.security) must allow it next to the keys themselves.
 """
 

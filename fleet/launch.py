@@ -1,7 +1,7 @@
 """``trustfg sim``: the main job -- a whole fleet as separate OS processes on one machine.
 
     trustfg sim [--scenario FILE] [--cars N] [--liar ID --misinformation P] [--out DIR]
-                [--seed S] [--timeout S] [--natnet-version V] [--mocap ARG ...]
+                [--seed S] [--timeout S] [--laps K] [--natnet-version V] [--mocap ARG ...]
 
 1. Resolves a fleet config for loopback: a free UDP port per car link and for NatNet
    (unicast), a free TCP port per process for Zenoh (explicit endpoints, multicast
@@ -47,6 +47,8 @@ from ..bridge import natnet
 from .bus import FleetBus
 from .command import command_parser, configured, stop_on_signals
 from .fleet_sim import draw_departures
+from .laps import final_legs
+from .link_keys import with_link_keys
 from .operator import OperatorSession
 from .processes import READY_TIMEOUT_S, Processes, wait_ready
 from .recording import convert_run
@@ -85,7 +87,7 @@ def loopback_fleet(scenario: Scenario, cars: int | None, liar: int | None, misin
         ip = (car_ips or {}).get(car.id, infra_ip)
         wired.append(dataclasses.replace(
             car, link=f"udp://{infra_ip}:{free_port(socket.SOCK_DGRAM)}",
-            listen=(f"tcp/{ip}:{free_port()}",),
+            listen=(f"tcp/{ip}:{free_port()}", f"udp/{ip}:{free_port(socket.SOCK_DGRAM)}?rel=0"),
             misinformation=misinformation if lie else car.misinformation,
             false_testimony=lie or car.false_testimony))
     endpoints = tuple(e for car in wired for e in car.listen)
@@ -190,9 +192,10 @@ def run(scenario: Scenario, out: Path, seed: int = 0, timeout_s: float | None = 
     ``stay``: run until the timeout even when every car has arrived (further trials)."""
     stop = stop or threading.Event()
     out.mkdir(parents=True, exist_ok=True)
+    scenario = with_link_keys(scenario, out / "keys")
     config_path = out / "fleet.toml"
     config_path.write_text(dump_scenario(scenario))
-    timeout_s = timeout_s or scenario.sim.timeout_s + 15.0
+    timeout_s = timeout_s or scenario.sim.timeout_s * scenario.control.laps + 15.0
     processes = Processes(wrap)
     observer_endpoint = f"tcp/{infra_ip}:{free_port()}"
     pending = sorted(schedule, key=lambda item: item[0])
@@ -232,6 +235,7 @@ def run(scenario: Scenario, out: Path, seed: int = 0, timeout_s: float | None = 
                     time.sleep(0.05)
                 t_go = time.time() + START_LEAD_S
                 operator.start(departures(scenario, seed, t_go), trial=1)
+                processes.cpu.sample(mark="go")
                 context = RunContext(scenario, out, processes, config_path, t_go, recorder)
                 print(f"trustfg sim: go (seed {seed}); recording to {out}", flush=True)
                 end = time.monotonic() + timeout_s
@@ -246,21 +250,26 @@ def run(scenario: Scenario, out: Path, seed: int = 0, timeout_s: float | None = 
                             pending.append((time.time() - t_go + float(again), action))
                             pending.sort(key=lambda item: item[0])
                     arrived = [i for i in ids if recorder.status.get(i) and recorder.status[i].at_goal]
+                    if arrived and "first_arrival" not in processes.cpu.marks:
+                        processes.cpu.sample(mark="first_arrival")
                     if len(arrived) == len(ids) and not pending and not stay:
                         break
                     if time.monotonic() > next_report:
                         next_report += 5.0
+                        processes.cpu.sample()
                         print(f"  t+{time.time() - t_go:5.1f}s: {len(arrived)}/{len(ids)} cars at their goals",
                               flush=True)
                     time.sleep(0.05)
                 crashed_early = processes.crashed()
+                processes.cpu.sample()
                 recorder.poll()
             finally:
                 processes.stop([name for name in processes.children if name.startswith("car")])
                 recorder.poll()
                 recorder.close()
         processes.stop()
-        summary = summarise(scenario, out, recorder, t_go, crashed_early)
+        summary = summarise(final_legs(scenario), out, recorder, t_go, crashed_early)
+        summary["cpu"] = processes.cpu.summary("go", "first_arrival")
     finally:
         processes.stop()
     if context is not None and context.events:
@@ -347,6 +356,9 @@ def print_summary(summary: dict) -> None:
         f"{i}: {r['median']}/{r['p95']}" if r else f"{i}: -" for i, r in summary["replan_ms"].items()))
     print("commands (Hz, jitter p99 ms): " + "  ".join(
         f"{i}: {c['rate_hz']}/{c['jitter_ms_p99']}" if c else f"{i}: -" for i, c in summary["control"].items()))
+    print("cpu (share of one core, whole run / go to first arrival): " + "  ".join(
+        f"{name}: {c['share']}/{c.get('share_go_first_arrival')}" if c else f"{name}: -"
+        for name, c in summary.get("cpu", {}).items()))
     print(f"messages: {summary['messages']}")
     if "liar_id" in summary:
         print(f"liar {summary['liar_id']}: min distance from honest cars {summary['liar_min_distance']}")
@@ -373,6 +385,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=None, help="run folder (default runs/sim-<time>)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the departures and cruise speeds")
     parser.add_argument("--timeout", type=float, default=None, help="seconds after the start (default: scenario's + 15)")
+    parser.add_argument("--laps", type=int, default=None,
+                        help="drive every route K times, back and forth (default: the scenario's control.laps, 1)")
     parser.add_argument("--natnet-version", choices=natnet.STREAM_VERSIONS, default=natnet.DEFAULT_STREAM_VERSION,
                         help="NatNet version mocap-sim streams (default %(default)s)")
     parser.add_argument("--no-dashboard", action="store_true", help="do not start the dashboard")
@@ -389,9 +403,13 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("--cars must be at least 1")
     if not 0.0 <= args.misinformation <= 1.0:
         parser.error("--misinformation must be within [0, 1]")
+    if args.laps is not None and args.laps < 1:
+        parser.error("--laps must be at least 1")
     fleet = configured("trustfg sim", lambda: with_deadman(loopback_fleet(
         load_scenario(args.scenario or default_scenario(args.cars)), args.cars, args.liar, args.misinformation),
         args.deadman))
+    if args.laps is not None:
+        fleet = dataclasses.replace(fleet, control=dataclasses.replace(fleet.control, laps=args.laps))
     out = args.out or Path("runs") / time.strftime("sim-%Y%m%d-%H%M%S")
     stop = stop_on_signals(threading.Event())
     try:

@@ -78,6 +78,9 @@ class Lab:
     car_ids: list[int]
     tag: str = field(default_factory=lambda: secrets.token_hex(2))
     subnet: int = field(default_factory=lambda: random.randint(100, 250))
+    hosts: dict[int, int] | None = None
+    """Car id -> the host (namespace) it runs in, several cars to a host; default: every
+    car in a namespace of its own (host = car id)."""
 
     def __post_init__(self) -> None:
         self.bridge = f"tfg{self.tag}br"
@@ -85,11 +88,18 @@ class Lab:
         self.created: list[tuple[str, str]] = []
         self.relays: list[DelayRelay] = []
 
+    def host(self, car_id: int) -> int:
+        return (self.hosts or {}).get(car_id, car_id)
+
     def ns(self, car_id: int) -> str:
-        return f"tfg{self.tag}c{car_id}"
+        return f"tfg{self.tag}c{self.host(car_id)}"
 
     def car_ip(self, car_id: int) -> str:
-        return f"10.77.{self.subnet}.{10 + car_id}"
+        return f"10.77.{self.subnet}.{10 + self.host(car_id)}"
+
+    def in_host(self, host: int, argv: list[str]) -> list[str]:
+        """A command line that runs ``argv`` in a host's namespace."""
+        return ["ip", "netns", "exec", f"tfg{self.tag}c{host}", *argv]
 
     def car_ips(self) -> dict[int, str]:
         return {car: self.car_ip(car) for car in self.car_ids}
@@ -102,8 +112,8 @@ class Lab:
             self.created.append(("link", self.bridge))
             sh("ip", "addr", "add", f"{self.infra_ip}/24", "dev", self.bridge)
             sh("ip", "link", "set", self.bridge, "up")
-            for car in self.car_ids:
-                ns, host, inner = self.ns(car), f"tfg{self.tag}h{car}", f"tfg{self.tag}i{car}"
+            for car in sorted({self.host(c): c for c in self.car_ids}.values()):  # one per namespace
+                ns, host, inner = self.ns(car), f"tfg{self.tag}h{self.host(car)}", f"tfg{self.tag}i{self.host(car)}"
                 sh("ip", "netns", "add", ns)
                 self.created.append(("netns", ns))
                 sh("ip", "link", "add", host, "type", "veth", "peer", "name", inner)
@@ -154,9 +164,19 @@ class Lab:
   }}
 }}""")
 
+    def isolate_hosts(self) -> None:
+        """Drop every packet between different hosts: what one host's cars say reaches
+        another's only through something in the root namespace (a Zenoh router)."""
+        for host in sorted({self.host(c) for c in self.car_ids}):
+            car = next(c for c in self.car_ids if self.host(c) == host)
+            self._drop_traffic_with(car, {self.car_ip(c) for c in self.car_ids if self.host(c) != host})
+
     def partition(self, car: int) -> None:
         """Cut car off from the other cars (it still sees the mocap and drives its car)."""
-        others = ", ".join(self.car_ip(c) for c in self.car_ids if c != car)
+        self._drop_traffic_with(car, {self.car_ip(c) for c in self.car_ids if c != car})
+
+    def _drop_traffic_with(self, car: int, addresses: set[str]) -> None:
+        others = ", ".join(sorted(addresses))
         self.clear(car)
         self._nft(car, f"""table inet {TABLE} {{
   chain input {{

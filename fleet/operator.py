@@ -11,11 +11,13 @@ Every operator's session (``trustfg go``, the dashboard in operator mode, the la
   agent.operation), next to the direct path for e-stops. It learns the cars' states from
   the status messages its owner hands it (:meth:`OperatorSession.heard`).
 
-A release goes on the bus only: a car's latch is cleared by its own car process's
-in-sequence RELEASE (the operator's datagrams are out of that sequence by design). A
-release ends this session's e-stop repeats first; one from another session that is still
-repeating its e-stop (``DIRECT_REPEAT_S`` after it) latches the car again: the car then
-stays stopped, its process says so, and the operator releases once more.
+A release goes both ways too: on the bus (each car process sends RELEASE in its own
+sequence, clearing the e-stop it latched itself) and, with the direct path, straight to the
+links (the operator's RELEASE, in a new session, clearing the e-stop the operator latched
+there: a car latches per sender, bridge.carlink.receiver rule 7). A release ends this
+session's e-stop repeats first; one from another session that is still repeating its
+e-stop (``DIRECT_REPEAT_S`` after it) latches the car again: the car then stays stopped,
+its process says so, and the operator releases once more.
 """
 
 from __future__ import annotations
@@ -103,11 +105,12 @@ class OperatorSession:
         self._publish_stop("estop", cars, now)
 
     def release(self, cars: Iterable[int] = ()) -> None:
-        """Release on the bus (each car process sends RELEASE in its own sequence); this
-        session's e-stop repeats to those cars end first."""
+        """Release on both paths: this session's e-stop repeats to those cars end, the
+        operator's RELEASE goes to the links, and the release on the bus."""
+        now = self.clock()
         if self.stopper is not None:
-            self.stopper.cancel(named(self.fleet, cars))
-        self._publish_stop("release", cars, self.clock())
+            self.stopper.release(named(self.fleet, cars), now)
+        self._publish_stop("release", cars, now)
 
     def abort(self, cars: Iterable[int] = (), trial: int = 0) -> None:
         self._publish_stop("abort", cars, self.clock(), trial)

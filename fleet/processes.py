@@ -16,6 +16,8 @@ import time
 from pathlib import Path
 from typing import Callable
 
+from .cpu import CpuMeter
+
 log = logging.getLogger(__name__)
 
 READY_TIMEOUT_S = 30.0
@@ -29,6 +31,8 @@ class Processes:
         self.children: dict[str, subprocess.Popen] = {}
         self.killed: set[str] = set()
         self.wrap = wrap or (lambda name, argv: argv)
+        self.cpu = CpuMeter()
+        self.cpu.watch("launcher", os.getpid())
 
     def start(self, name: str, args: list[str], log_path: Path, stdout=None) -> subprocess.Popen:
         log_file = open(log_path, "a")
@@ -36,6 +40,7 @@ class Processes:
         process = subprocess.Popen(argv, stdout=stdout or log_file, stderr=log_file, start_new_session=True, text=True)
         log_file.close()
         self.children[name] = process
+        self.cpu.watch(name, process.pid)
         return process
 
     def stop(self, names: list[str] | None = None) -> None:

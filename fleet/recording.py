@@ -1,10 +1,13 @@
-"""Recorded runs as MCAP files (the robotics log format; they open in Foxglove).
+"""Recorded runs as MCAP files (the robotics log format), written with Foxglove's SDK.
 
 Every fleet message becomes an MCAP message on its own key expression as the topic
 (``trustfg/F/N/plan`` ...), JSON-encoded (agent.messages.to_dict) under a JSON Schema
-per kind; log time is when it arrived. ``trustfg sim`` runs also carry mocap-sim's
-ground truth on ``trustfg/F/truth`` (every car's x, y, yaw, v, omega at 50 Hz), and the
-fleet config that ran as metadata ``trustfg.fleet`` (its TOML text).
+per kind; log time is when it arrived. Next to them, the same run in Foxglove's
+well-known schemas, so Foxglove's 3D panel shows it (fleet.foxglove_scene: the map, the
+cars, their plans and goals, every car's epsilon circles, frame transforms, a log).
+``trustfg sim`` runs also carry mocap-sim's ground truth on ``trustfg/F/truth`` (every
+car's x, y, yaw, v, omega at 50 Hz), and the fleet config that ran as metadata
+``trustfg.fleet`` (its TOML text).
 
     trustfg record --config FILE --out RUN.mcap     record a live fleet (e.g. in the lab)
 """
@@ -17,15 +20,15 @@ import threading
 from dataclasses import dataclass
 from pathlib import Path
 
+import foxglove
 from mcap.reader import make_reader
-from mcap.writer import CompressionType, Writer
 
 from ..agent import messages
 from ..agent.config import Scenario
 from ..agent.scenario_files import dump_scenario, load_scenario, scenario_from_dict
-from . import keys
 from .bus import FleetBus
 from .command import command_parser, configured, stop_on_signals
+from .foxglove_scene import FoxgloveLog
 
 NUMBER = {"type": "number"}
 INTEGER = {"type": "integer"}
@@ -57,39 +60,29 @@ def schema(kind: str) -> bytes:
                        "required": sorted(properties)}).encode()
 
 
-def topic(fleet: str, kind: str, sender: int) -> str:
-    return keys.fleet_key(fleet, kind) if kind in (*keys.OPERATOR, keys.TRUTH) else keys.key(fleet, sender, kind)
-
-
 class McapRecorder:
-    """Writes messages to an MCAP file as they come (chunked, zstd)."""
+    """Writes messages to an MCAP file as they come (Foxglove's SDK: chunked, zstd): the
+    fleet messages and their Foxglove scene."""
 
     def __init__(self, path: Path, scenario: Scenario):
-        self.fleet = scenario.fleet
-        self._file = open(path, "wb")
-        self._writer = Writer(self._file, compression=CompressionType.ZSTD)
-        self._writer.start(profile="", library="trustfg")
-        self._writer.add_metadata("trustfg.fleet", {"toml": dump_scenario(scenario)})
-        self._schemas = {kind: self._writer.register_schema(f"trustfg.{kind}", "jsonschema", schema(kind))
-                         for kind in SCHEMAS}
-        self._channels: dict[str, int] = {}
-        self._sequence = 0
-        self.count = 0
+        self._context = foxglove.Context()
+        self._writer = foxglove.open_mcap(path, allow_overwrite=True, context=self._context)
+        self._writer.write_metadata("trustfg.fleet", {"toml": dump_scenario(scenario)})
+        self._log = FoxgloveLog(scenario, self._context)
+        self._map_written = False
+
+    @property
+    def count(self) -> int:
+        return self._log.count
 
     def write(self, kind: str, sender: int, at: float, data: dict) -> None:
-        name = topic(self.fleet, kind, sender)
-        channel = self._channels.get(name)
-        if channel is None:
-            channel = self._channels[name] = self._writer.register_channel(name, "json", self._schemas[kind])
-        self._sequence += 1
-        stamp = int(round(at * 1e9))
-        self._writer.add_message(channel, log_time=stamp, data=json.dumps(data).encode(),
-                                 publish_time=stamp, sequence=self._sequence)
-        self.count += 1
+        if not self._map_written:
+            self._log.write_map(at)
+            self._map_written = True
+        self._log.write(kind, sender, at, data, schema(kind))
 
     def close(self) -> None:
-        self._writer.finish()
-        self._file.close()
+        self._writer.close()
 
 
 def convert_run(folder: Path, scenario: Scenario) -> Path:
@@ -141,7 +134,9 @@ def read_recording(path: Path) -> tuple[Scenario, list[Recorded]]:
         scenario = scenario_from_dict(tomllib.loads(fleet_toml))
         events = []
         for schema_record, channel, message in reader.iter_messages(log_time_order=True):
-            kind = schema_record.name.removeprefix("trustfg.") if schema_record else "?"
+            if schema_record is None or not schema_record.name.startswith("trustfg."):
+                continue  # Foxglove's scene of the run, not a fleet message
+            kind = schema_record.name.removeprefix("trustfg.")
             data = json.loads(message.data)
             sender = data.get("id", 0) if kind != "truth" else 0
             events.append(Recorded(message.log_time / 1e9, kind, sender, data))

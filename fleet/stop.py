@@ -3,9 +3,11 @@
 An e-stop goes two independent ways at once: E_STOP datagrams straight to each named car's
 link (no car process needed: the car latches it whatever else it hears) and a stop message
 on the bus, which every car process applies (it sends E_STOP itself and ends its trial).
-A car stays stopped until the operator releases it (``--release``: on the bus; each car
-process then sends RELEASE in its own sequence, and the car waits for a new start -- a
-release never resumes a trial, and a named car still driving ends its trial).
+A car stays stopped until the operator releases it (``--release``: on the bus, where each
+car process then sends RELEASE in its own sequence, and straight to each version-2 link,
+where the operator's own RELEASE clears the e-stops it sent there -- a car latches per
+sender; the car then waits for a new start: a release never resumes a trial, and a named
+car still driving ends its trial).
 ``--abort`` ends the running trial instead: the cars hold still (STOP, not latched) and
 wait for the next start.
 
@@ -36,19 +38,20 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--config", required=True, help="fleet config: a TOML file or a shipped name (lab/fleet)")
     parser.add_argument("--cars", type=int, nargs="+", default=[], help="the cars to stop (default: every car)")
     what = parser.add_mutually_exclusive_group()
-    what.add_argument("--release", action="store_true", help="release an e-stop (on the bus)")
+    what.add_argument("--release", action="store_true",
+                      help="release an e-stop (on the bus, and straight to version-2 links)")
     what.add_argument("--abort", action="store_true", help="end the running trial: cars hold and wait")
     parser.add_argument("--trial", type=int, default=0, help="with --abort: only this trial (0: whichever runs)")
     parser.add_argument("--path", choices=("both", "bus", "link"), default="both",
-                        help="which way an e-stop goes")
+                        help="which way an e-stop (or a release) goes")
     parser.add_argument("--repeat", type=float, default=DIRECT_REPEAT_S,
                         help="seconds the E_STOP datagrams are repeated on the links")
     parser.add_argument("--wait", type=float, default=2.0, help="seconds to wait for the cars to confirm")
     parser.add_argument("--listen", action="append", default=[], help="Zenoh endpoint to listen on (repeatable)")
     args = parser.parse_args(argv)
     action = "release" if args.release else "abort" if args.abort else "estop"
-    if action != "estop" and args.path == "link":
-        parser.error(f"a {action} goes on the bus only (--path bus or both)")
+    if action == "abort" and args.path == "link":
+        parser.error("an abort goes on the bus only (--path bus or both)")
     if not (args.repeat >= 0 and args.wait >= 0):
         parser.error("--repeat and --wait must be >= 0")
     sent_direct = time.time() if action == "estop" and args.path != "bus" and first_e_stop(args.config, args.cars) \
@@ -62,11 +65,13 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(str(exc))
     stopper = None
     if action == "estop" and args.path != "bus":
-        stopper = LinkStopper(fleet)  # the direct path, repeated: no Zenoh, no numpy before it
+        stopper = configured("trustfg stop", lambda: LinkStopper(fleet))  # the direct path, repeated: no Zenoh yet
         stopper.engage(cars, time.time(), args.repeat)
         sent_direct = sent_direct or time.time()
-    else:
-        stopper = LinkStopper(fleet) if action == "release" else None  # to see the latch go
+    elif action == "release":
+        stopper = configured("trustfg stop", lambda: LinkStopper(fleet))  # to see the latch go
+        if args.path != "bus":
+            stopper.release(cars, time.time())  # the operator's own latches (a version-2 link)
     try:
         return _on_the_bus(fleet, cars, action, args, stopper, issued, sent_direct)
     finally:
@@ -146,15 +151,16 @@ def _confirmed(action: str, state: str, stopper: LinkStopper | None, car: int) -
 def _report(cars: list[int], action: str, seen: dict[int, str], stopper: LinkStopper | None, issued: float,
             sent_direct: float | None) -> int:
     if sent_direct is not None:
-        print(f"E_STOP sent straight to the links of cars {' '.join(map(str, cars))} "
+        direct = [car for car in cars if stopper is None or car not in stopper.unreachable]
+        print(f"E_STOP sent straight to the links of cars {' '.join(map(str, direct))} "
               f"{(sent_direct - issued) * 1e3:.0f} ms after the command")
     print(f"{'car':>4}  {'bus (car process)':<20} {'link (the car)':<20}")
     failed = []
     for car in cars:
         state = seen[car] or "no answer"
         latched = _latched(stopper, car)
-        link = "-" if stopper is None else {True: "e-stop latched", False: "not latched",
-                                            None: "no answer"}[latched]
+        link = "-" if stopper is None else "no key here" if car in stopper.unreachable else {
+            True: "e-stop latched", False: "not latched", None: "no answer"}[latched]
         print(f"{car:>4}  {state:<20} {link:<20}")
         if not _confirmed(action, seen[car], stopper, car):
             failed.append(car)

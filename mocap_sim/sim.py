@@ -2,7 +2,8 @@
 
 For every car of the config: a simulated unicycle (agent.vehicle) that takes the
 same UDP command datagrams as a real car on its ``link`` address, through the very
-receiving logic real firmware runs (bridge.carlink.CommandFilter: checksum, car id,
+receiving logic real firmware runs (bridge.carlink.CommandFilter: the MAC with the car's
+key -- or the CRC of version 1 where a car's config asks for it --, car id, sessions and
 sequence order, 250 ms watchdog, e-stop). A NatNet server (mocap_sim.natnet_server)
 streams every car's pose as Motive would, at the config's NatNet address and ports.
 
@@ -50,7 +51,7 @@ from ..agent.config import ConfigError, Scenario, parse_udp_address
 from ..agent.scenario_files import load_scenario
 from ..agent.vehicle import VehicleState, step
 from ..bridge import natnet
-from ..bridge.carlink import CommandReceiver
+from ..bridge.carlink import CommandReceiver, link_key
 from ..fleet.command import command_parser, configured, stop_on_signals
 from ..fleet.ticker import ticks
 from .natnet_server import NatNetServer, NatNetServerOptions, Occlusion
@@ -108,6 +109,7 @@ class MocapSim:
         self.scenario = scenario
         self.options = options
         self.clock = clock
+        self._keys = {car.id: link_key(car) for car in scenario.cars}  # version 2 cars check MACs
         self.stop = threading.Event()
         self._lock = threading.Lock()
         self.states = {car.id: VehicleState(car.start[0], car.start[1], car.start_heading) for car in scenario.cars}
@@ -145,7 +147,7 @@ class MocapSim:
         try:
             for car in self.scenario.cars:
                 host, port = parse_udp_address(car.link, f"cars[id={car.id}].link")
-                receivers[car.id] = CommandReceiver(car.id, (host, port))
+                receivers[car.id] = CommandReceiver(car.id, (host, port), key=self._keys[car.id])
                 receivers[car.id].start()
             if self.options.control_port is not None:
                 threading.Thread(target=self._control, name="mocap-control", daemon=True).start()

@@ -24,6 +24,11 @@ class PlannerConfig:
     """Nominal speed used to set the planned arrival time (a car may override it)."""
     max_speed_mps: float = 0.6
     """Speeds above this are penalised (soft limit; the vehicle's hard limit is higher)."""
+    reach_margin_m: float = 0.5
+    """A peer is left out of the graph when even closing at max_speed_mps from both sides
+    over the whole horizon, and along its own plan, it stays this much beyond its epsilon
+    from where our plan starts (agent.planner.peers_within_reach); covers a plan's small
+    excess over the soft speed limit."""
     sigma_start: float = 1e-3
     sigma_start_velocity: float = 0.05
     sigma_goal: float = 0.01
@@ -51,9 +56,13 @@ class PlannerConfig:
     diagonal_damping: bool = True
     """Damp with lambda * diag(J^T J) (scale-invariant; the hinges are far stiffer than
     the GP prior)."""
+    intervals_per_factor: int = 4
+    """'batched': consecutive intervals checked by one GTSAM factor. Each factor is a call
+    from C++ into Python per linearisation and per error evaluation; larger chunks make
+    fewer calls but denser linear systems (agent.interval_factors)."""
     interpolation: str = "batched"
-    """'batched': one factor per interval evaluating every check in one numpy call;
-    'gtsam': one WnoaInterpFactorPoint2 per interpolated check (slower, for reference)."""
+    """'batched': one factor per chunk of intervals, every check evaluated in one numpy
+    call; 'gtsam': one WnoaInterpFactorPoint2 per interpolated check (slower, for reference)."""
     lane_keeping: bool = True
     """Pull plans towards the car's route (start, via points, goal): its lane."""
     proximity: bool = True
@@ -69,11 +78,13 @@ class PlannerConfig:
         for name in (
             "qc", "min_horizon_s", "cruise_speed_mps", "max_speed_mps", "sigma_start",
             "sigma_start_velocity", "sigma_goal", "sigma_goal_velocity", "sigma_obstacle",
-            "sigma_proximity", "sigma_consistency", "sigma_speed", "sigma_lane", "relative_error_tol", "absolute_error_tol", "lambda_initial",
+            "sigma_proximity", "sigma_consistency", "sigma_speed", "sigma_lane", "reach_margin_m", "relative_error_tol", "absolute_error_tol", "lambda_initial",
         ):
             positive(getattr(self, name), f"{path}.{name}")
         if self.lambda_factor <= 1.0:
             raise ConfigError(f"{path}.lambda_factor: must be > 1")
+        if self.intervals_per_factor < 1:
+            raise ConfigError(f"{path}.intervals_per_factor: must be >= 1")
         if self.max_iterations < 1:
             raise ConfigError(f"{path}.max_iterations: must be >= 1")
         if self.interpolation not in ("batched", "gtsam"):
@@ -115,6 +126,9 @@ class TrustConfig:
     """g(tau) ranges from 1 (tau >= tau_full) to this (tau <= tau_floor)."""
     tau_full: float = 0.9
     tau_floor: float = 0.5
+    epsilon_gain_fixed: float = 1.0
+    """g for every peer when the transparency factor is off (planner.transparency = false):
+    1 keeps eps_0 from everyone; the bank's "wide" baseline keeps 2 eps_0."""
 
     def validate(self, path: str) -> None:
         if not 0.0 < self.forgetting <= 1.0:
@@ -125,8 +139,8 @@ class TrustConfig:
             raise ConfigError(f"{path}.tau_floor/tau_full: need 0 <= tau_floor < tau_full <= 1")
         if self.failure_weight <= 0 or self.consistency_failure_weight <= 0:
             raise ConfigError(f"{path}.failure_weight/consistency_failure_weight: must be > 0")
-        if self.epsilon_gain_max < 1.0:
-            raise ConfigError(f"{path}.epsilon_gain_max: must be >= 1")
+        if self.epsilon_gain_max < 1.0 or self.epsilon_gain_fixed < 1.0:
+            raise ConfigError(f"{path}.epsilon_gain_max/epsilon_gain_fixed: must be >= 1")
         for name in (
             "transparency_tolerance_m", "plan_reject_m", "consistency_tolerance_mps2",
             "evidence_period_s", "stale_after_s", "testimony_deviation",

@@ -83,6 +83,15 @@ class ControlConfig:
 
     command_rate_hz: float = 50.0
     replan_period_s: float = 0.2
+    plan_period_s: float = 0.1
+    """How often a car publishes its latest plan (best effort: each supersedes the last).
+    More often than it replans, so that a peer still gets one within a second when most
+    are lost: at 50 % loss, P(no plan in 1 s) = 0.5^10 = 0.1 %."""
+    laps: int = 1
+    """How many times a car drives its route: lap 2 goes back from the goal to the start,
+    lap 3 out again, ... (a long run for soak tests; 1 in the lab)."""
+    lap_turn_s: float = 2.0
+    """Between laps a car turns in place towards its next leg for this long, then drives."""
     trust_report_period_s: float = 0.5
     pose_period_s: float = 0.05
     """How often a car publishes its own pose on the bus."""
@@ -99,9 +108,12 @@ class ControlConfig:
     (it keeps its car stopped meanwhile)."""
 
     def validate(self, path: str) -> None:
-        for name in ("command_rate_hz", "replan_period_s", "trust_report_period_s", "pose_period_s",
-                     "status_period_s", "pose_timeout_s", "link_ping_period_s", "retry_s"):
+        for name in ("command_rate_hz", "replan_period_s", "plan_period_s", "trust_report_period_s",
+                     "pose_period_s", "status_period_s", "pose_timeout_s", "lap_turn_s",
+                     "link_ping_period_s", "retry_s"):
             positive(getattr(self, name), f"{path}.{name}")
+        if self.laps < 1:
+            raise ConfigError(f"{path}.laps: must be >= 1")
         if self.start_timeout_s < 0:
             raise ConfigError(f"{path}.start_timeout_s: must be >= 0")
 
@@ -164,6 +176,11 @@ class BusConfig:
     zenoh_config: str = ""
     queue_size: int = 4096
     """Received samples waiting for the agent; beyond this the oldest are dropped (counted)."""
+    max_links: int = 4
+    """Zenoh links admitted per peer (``transport/unicast/max_links``). A car listens on a
+    TCP endpoint (reliable: trust reports, the start, liveliness) and may add a UDP one
+    marked ``?rel=0`` (best effort: plans, poses, status); with links opened both ways that
+    is up to four per pair. Zenoh sends each message on the link of its reliability."""
 
     def validate(self, path: str) -> None:
         if self.mode not in ("peer", "client"):
@@ -174,6 +191,8 @@ class BusConfig:
                     raise ConfigError(f"{path}.{name}[{i}]: not a Zenoh endpoint (like tcp/10.0.0.2:7447): {endpoint!r}")
         if self.queue_size < 16:
             raise ConfigError(f"{path}.queue_size: must be >= 16")
+        if self.max_links < 1:
+            raise ConfigError(f"{path}.max_links: must be >= 1")
 
 
 @dataclass(frozen=True)

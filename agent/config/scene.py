@@ -71,6 +71,14 @@ class CarConfig:
     """Its NatNet rigid-body id in Motive; 0 means the same as ``id``."""
     link: str = ""
     """Where its velocity commands go, ``udp://HOST:PORT`` (the car, or mocap_sim)."""
+    link_version: int = 2
+    """Car-link version: 2, authenticated with the car's key (link_key_file); 1 only for
+    old firmware that cannot check a MAC (anyone on the network can then drive the car)."""
+    link_key_file: str = ""
+    """File holding the car's 32-byte link key as 64 hex digits (owner-readable only; never
+    commit one). Needed for link_version 2."""
+    link_key: str = ""
+    """The key inline, as 64 hex digits -- for throw-away runs only; prefer link_key_file."""
     listen: tuple[str, ...] = ()
     """Zenoh endpoints this car's process listens on, e.g. ``tcp/10.0.0.11:7447``
     (added to ``bus.listen``)."""
@@ -95,6 +103,12 @@ class CarConfig:
             raise ConfigError(f"{path}.rigid_body: must be >= 0")
         if self.link:
             parse_udp_address(self.link, f"{path}.link")
+        if self.link_version not in (1, 2):
+            raise ConfigError(f"{path}.link_version: expected 1 or 2, got {self.link_version}")
+        if self.link_version == 1 and (self.link_key or self.link_key_file):
+            raise ConfigError(f"{path}: link_version 1 does not use a key; drop the key or use version 2")
+        if self.link_key and (len(self.link_key) != 64 or any(c not in "0123456789abcdefABCDEF" for c in self.link_key)):
+            raise ConfigError(f"{path}.link_key: expected 64 hexadecimal digits")
         positive(self.radius_m, f"{path}.radius_m")
         if not 0.0 <= self.misinformation <= 1.0:
             raise ConfigError(f"{path}.misinformation: must be within [0, 1]")

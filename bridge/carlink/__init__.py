@@ -10,33 +10,43 @@ Three pieces, each documented where it lives:
   firmware runs these rules; mocap_sim's simulated car runs this very class.
 * :mod:`.answer` -- the bytes a car sends back to a PING datagram (pure).
 * :mod:`.link` -- the sockets (thin I/O): :class:`CommandSender` for the car process and
-  the operator's tools (:func:`open_sender` builds it from a car's config) and
+  the operator's tools (:meth:`CommandSender.for_car` builds it from a car's config) and
   :class:`CommandReceiver`, a reader thread feeding a :class:`CommandFilter`.
+* :mod:`.keys` -- where a car's link key comes from (its key file) and how one is made.
 
-Imports point one way: ``answer``, ``receiver`` and ``link`` use ``codec``, ``receiver``
-uses ``answer``, ``link`` uses both.
+Imports point one way: ``answer``, ``receiver``, ``keys`` and ``link`` use ``codec``,
+``receiver`` uses ``answer``, ``link`` uses ``answer``, ``receiver`` and ``keys``.
 Everything public is re-exported here, so callers import from ``trustfg.bridge.carlink``.
 """
 
-from .answer import ANSWER_SIZE, Answer, CarState, decode_answer, encode_answer
+from .answer import ANSWER_SIZE, ANSWER_V2_SIZE, Answer, CarState, decode_answer, encode_answer
 from .codec import (
     DATAGRAM_SIZE,
+    DATAGRAM_V2_SIZE,
+    KEY_BYTES,
+    MAC_BYTES,
     MAGIC,
     SEQ_MODULUS,
+    SOURCE_CAR_PROCESS,
+    SOURCE_OPERATOR,
     VERSION,
+    VERSION_2,
     CarLinkError,
     Command,
     Flags,
     decode_command,
+    decode_command_v2,
     encode_command,
+    encode_command_v2,
     seq_after,
 )
+from .keys import link_key, new_key, write_key_file
 from .link import (
     Clock,
     CommandReceiver,
     CommandSender,
     SenderStats,
-    open_sender,
+    new_session,
 )
 from .receiver import (
     DEFAULT_RESYNC_AFTER_S,
@@ -46,9 +56,11 @@ from .receiver import (
 )
 
 __all__ = [
-    "DATAGRAM_SIZE", "MAGIC", "SEQ_MODULUS", "VERSION", "CarLinkError", "Command", "Flags",
-    "decode_command", "encode_command", "seq_after",
+    "DATAGRAM_SIZE", "DATAGRAM_V2_SIZE", "KEY_BYTES", "MAC_BYTES", "MAGIC", "SEQ_MODULUS",
+    "SOURCE_CAR_PROCESS", "SOURCE_OPERATOR", "VERSION", "VERSION_2", "CarLinkError", "Command",
+    "Flags", "decode_command", "decode_command_v2", "encode_command", "encode_command_v2", "seq_after",
+    "link_key", "new_key", "write_key_file", "new_session",
     "DEFAULT_RESYNC_AFTER_S", "DEFAULT_WATCHDOG_TIMEOUT_S", "CommandFilter", "FilterCounters",
-    "ANSWER_SIZE", "Answer", "CarState", "decode_answer", "encode_answer",
-    "Clock", "CommandReceiver", "CommandSender", "SenderStats", "open_sender",
+    "ANSWER_SIZE", "ANSWER_V2_SIZE", "Answer", "CarState", "decode_answer", "encode_answer",
+    "Clock", "CommandReceiver", "CommandSender", "SenderStats",
 ]

@@ -1,5 +1,11 @@
 """Car-link codec: the bytes of one velocity command, and nothing else (pure, no I/O).
 
+Two versions. Version 2 is authenticated (a MAC with a per-car key) and is what a car
+process speaks whenever its car has a key; version 1 (a CRC, no authentication: anyone on
+the network can drive the car) remains for old firmware, only where a car's config asks for
+it (``link_version = 1``). A receiver speaks one version, never both: a car with a key
+refuses version-1 datagrams, so an attacker cannot downgrade it.
+
 Datagram (version 1)
 --------------------
 Exactly 30 bytes, little-endian, no padding, IEEE 754 floats::
@@ -19,12 +25,14 @@ Exactly 30 bytes, little-endian, no padding, IEEE 754 floats::
 Flags (what a car does with each is in :mod:`.receiver`):
 
 * ``E_STOP`` (0x0001): stop now and stay stopped (latched) until a datagram with RELEASE
-  arrives. Taken from any sender whatever its sequence number: the operator sends it
-  straight to the car, next to the car process's own stream.
+  from the same sender (version 2: the same ``source``) arrives. Taken whatever its
+  sequence number or session: the operator sends it straight to the car, next to the car
+  process's own stream.
 * ``STOP`` (0x0002): hold still while this is the latest command (not latched); v and
   omega are ignored. Sent while a car waits, on shutdown and when its pose is lost.
-* ``RELEASE`` (0x0004): clears a latched E_STOP (in sequence, from the car process, after
-  the operator released the car). Never together with E_STOP.
+* ``RELEASE`` (0x0004): clears the E_STOP its sender latched (in sequence: the car process
+  after the operator released the car; version 2, the operator's own tools for the e-stops
+  they sent straight to the car). Never together with E_STOP.
 * ``PING`` (0x0008): answer this datagram (:mod:`.answer`) and otherwise ignore it, except
   that an E_STOP in it still latches. The operator's tools use it to see that a car link
   answers (``trustfg check``) and that an e-stop latched (``trustfg stop``).
@@ -52,12 +60,55 @@ car id 0, non-finite stamp/v/omega (NaN or infinity), reserved flag bits set or 
 with RELEASE. Encoding
 rounds v and omega to the nearest f32 (a value beyond the f32 range is an error).
 
+Datagram (version 2, authenticated)
+-----------------------------------
+Exactly 52 bytes, little-endian, no padding, IEEE 754 floats::
+
+    offset size type  field
+    0      2    bytes magic        b"TF" (0x54 0x46)
+    2      1    u8    version      2
+    3      1    u8    car_id       1..255 (0 is invalid)
+    4      1    u8    source       which sender: 0 the car process, 1 the operator, ...
+    5      1    u8    reserved     0
+    6      2    u16   flags        as in version 1 (E_STOP, STOP, RELEASE, PING)
+    8      8    u64   session      the sender's session: its wall clock when it started,
+                                   microseconds since the Unix epoch (a restarted sender
+                                   has a larger one)
+    16     4    u32   seq          0, 1, 2, ... within the session (never wraps: a sender
+                                   starts a new session first)
+    20     8    f64   stamp_s      sender's fleet clock, seconds (finite)
+    28     4    f32   v_mps        linear velocity, m/s (finite)
+    32     4    f32   omega_radps  angular velocity, rad/s, counter-clockwise positive (finite)
+    36     16   bytes mac          HMAC-SHA256(key, bytes 0..35), its first 16 bytes
+
+MAC: HMAC (RFC 2104) with SHA-256 (FIPS 180-4) keyed with the car's 32-byte key, over
+bytes 0..35; the tag is the first 16 bytes of the 32-byte HMAC (truncation as RFC 2104
+section 5 allows; 128 bits). Compare in constant time. Any HMAC-SHA256 of a firmware's
+crypto library will do (mbedTLS ``mbedtls_md_hmac``, ...); Python
+``hmac.new(key, d[:36], "sha256").digest()[:16]``.
+
+Worked example: key 00 01 02 .. 1f (the bytes 0 to 31; an example, never a real key),
+car 3, source 0, session 1700000000000000 (0x00060A24181E4000), seq 7, stamp 12.5 s,
+v 0.25 m/s, omega -0.5 rad/s, no flags::
+
+    54 46 02 03 00 00 00 00 00 40 1e 18 24 0a 06 00
+    07 00 00 00 00 00 00 00 00 00 29 40 00 00 80 3e
+    00 00 00 bf f9 d7 2d 99 0d 00 8f 4d af fb 26 95
+    e1 4c 98 dd
+
+(the MAC is the last 16 bytes). A receiver rejects, in this order: wrong length, bad
+magic, other version, bad MAC, reserved byte not 0, car id 0, non-finite numbers, reserved
+flag bits. Which sessions and sequence numbers it accepts (replays, restarts) is in
+:mod:`.receiver`.
+
 What a car does with the commands it decodes is in :mod:`.receiver`.
 """
 
 from __future__ import annotations
 
 import enum
+import hashlib
+import hmac
 import math
 import operator
 import struct
@@ -67,9 +118,17 @@ from dataclasses import dataclass
 MAGIC = b"TF"
 VERSION = 1
 DATAGRAM_SIZE = 30
+VERSION_2 = 2
+DATAGRAM_V2_SIZE = 52
+MAC_BYTES = 16
+KEY_BYTES = 32
+SOURCE_CAR_PROCESS = 0
+SOURCE_OPERATOR = 1
 SEQ_MODULUS = 2**32
+SESSION_MODULUS = 2**64
 _HALF_SEQ = 2**31
 _BODY = struct.Struct("<2sBBIdffH")  # bytes 0..25, covered by the CRC
+_BODY_V2 = struct.Struct("<2sBBBBHQIdff")  # bytes 0..35, covered by the MAC
 _CRC = struct.Struct("<I")
 _F32 = struct.Struct("<f")
 
@@ -78,8 +137,9 @@ class CarLinkError(ValueError):
     """A car-link datagram or command field is invalid.
 
     ``reason`` is a short machine-readable tag (``"length"``, ``"magic"``, ``"version"``,
-    ``"crc"``, ``"car_id"``, ``"non_finite"``, ``"flags"``, ``"range"``, ``"type"``) used
-    to count rejections; the last two come only from building a :class:`Command`.
+    ``"crc"``, ``"mac"``, ``"reserved"``, ``"car_id"``, ``"non_finite"``, ``"flags"``,
+    ``"range"``, ``"type"``, ``"key"``) used to count rejections; ``"range"`` and
+    ``"type"`` come only from building a :class:`Command`, ``"key"`` from a bad key.
     """
 
     def __init__(self, reason: str, detail: str):
@@ -102,7 +162,9 @@ _KNOWN_FLAGS = int(Flags.E_STOP | Flags.STOP | Flags.RELEASE | Flags.PING)
 
 @dataclass(frozen=True)
 class Command:
-    """One velocity command, validated on construction (raises :class:`CarLinkError`)."""
+    """One velocity command, validated on construction (raises :class:`CarLinkError`).
+
+    ``session`` and ``source`` travel in version 2 only (version 1 decodes them as 0)."""
 
     car_id: int
     seq: int
@@ -110,10 +172,14 @@ class Command:
     v_mps: float
     omega_radps: float
     flags: Flags = Flags.NONE
+    session: int = 0
+    source: int = SOURCE_CAR_PROCESS
 
     def __post_init__(self) -> None:
         _check_int("car_id", self.car_id, 1, 255)
         _check_int("seq", self.seq, 0, SEQ_MODULUS - 1)
+        _check_int("session", self.session, 0, SESSION_MODULUS - 1)
+        _check_int("source", self.source, 0, 255)
         _check_int("flags", self.flags, 0, 0xFFFF)
         if int(self.flags) & ~_KNOWN_FLAGS:
             raise CarLinkError("flags", f"reserved flag bits set: 0x{int(self.flags):04x}")
@@ -177,30 +243,66 @@ def decode_command(data: bytes | bytearray | memoryview) -> Command:
     return Command(car_id, seq, stamp_s, v_mps, omega_radps, flags)
 
 
-def seal(body: bytes) -> bytes:
-    """A datagram: its body, then the CRC-32 of the body (u32, little-endian)."""
-    return body + _CRC.pack(zlib.crc32(body))
+def seal(body: bytes, key: bytes | None = None) -> bytes:
+    """A datagram: its body, then its check -- version 1 the CRC-32 of the body (u32,
+    little-endian), version 2 (with the car's ``key``) the MAC of the body. Commands and
+    answers (:mod:`.answer`) share this framing."""
+    return body + (_CRC.pack(zlib.crc32(body)) if key is None else mac(check_key(key), body))
 
 
-def open_frame(data: object, layout: struct.Struct, magic: bytes, version: int) -> tuple:
+def open_frame(data: object, layout: struct.Struct, magic: bytes, version: int,
+               key: bytes | None = None) -> tuple:
     """The body fields of a sealed datagram whose body is ``layout`` (starting with the
     magic and the version), after checking, in this order, type, length, magic, version
-    and CRC; :class:`CarLinkError` otherwise."""
+    and the CRC (without ``key``) or the MAC (with it); :class:`CarLinkError` otherwise."""
     if not isinstance(data, (bytes, bytearray, memoryview)):
         raise CarLinkError("type", f"expected bytes, got {type(data).__name__}")
     data = bytes(data)
-    if len(data) != layout.size + _CRC.size:
-        raise CarLinkError("length", f"{len(data)} bytes, expected {layout.size + _CRC.size}")
+    check = _CRC.size if key is None else MAC_BYTES
+    if len(data) != layout.size + check:
+        raise CarLinkError("length", f"{len(data)} bytes, expected {layout.size + check}")
     fields = layout.unpack_from(data)
     if fields[0] != magic:
         raise CarLinkError("magic", f"magic {fields[0]!r}, expected {magic!r}")
     if fields[1] != version:
         raise CarLinkError("version", f"version {fields[1]}, this end speaks {version}")
-    (crc,) = _CRC.unpack_from(data, layout.size)
-    expected = zlib.crc32(data[:layout.size])
-    if crc != expected:
-        raise CarLinkError("crc", f"crc 0x{crc:08x}, computed 0x{expected:08x}")
+    body = data[:layout.size]
+    if key is None:
+        (crc,) = _CRC.unpack_from(data, layout.size)
+        if crc != zlib.crc32(body):
+            raise CarLinkError("crc", f"crc 0x{crc:08x}, computed 0x{zlib.crc32(body):08x}")
+    elif not hmac.compare_digest(data[layout.size:], mac(key, body)):
+        raise CarLinkError("mac", "the MAC does not verify: wrong key, or altered or forged")
     return fields
+
+
+def check_key(key: object) -> bytes:
+    """A car's link key: exactly KEY_BYTES bytes (else :class:`CarLinkError`, reason "key")."""
+    if not isinstance(key, (bytes, bytearray)) or len(key) != KEY_BYTES:
+        raise CarLinkError("key", f"a car-link key is {KEY_BYTES} bytes, got "
+                           f"{len(key) if isinstance(key, (bytes, bytearray)) else type(key).__name__}")
+    return bytes(key)
+
+
+def mac(key: bytes, body: bytes) -> bytes:
+    """The version-2 tag: HMAC-SHA256(key, body) truncated to MAC_BYTES."""
+    return hmac.new(key, body, hashlib.sha256).digest()[:MAC_BYTES]
+
+
+def encode_command_v2(cmd: Command, key: bytes) -> bytes:
+    """The 52-byte authenticated datagram of ``cmd`` (v and omega rounded to f32)."""
+    return seal(_BODY_V2.pack(MAGIC, VERSION_2, cmd.car_id, cmd.source, 0, int(cmd.flags), cmd.session,
+                              cmd.seq, cmd.stamp_s, cmd.v_mps, cmd.omega_radps), key)
+
+
+def decode_command_v2(data: bytes | bytearray | memoryview, key: bytes) -> Command:
+    """The command in an authenticated datagram; raises :class:`CarLinkError` (and nothing
+    else) if it is invalid or its MAC does not verify with ``key``."""
+    (_, _, car_id, source, reserved, flags, session, seq, stamp_s, v_mps,
+     omega_radps) = open_frame(data, _BODY_V2, MAGIC, VERSION_2, key)
+    if reserved != 0:
+        raise CarLinkError("reserved", f"reserved byte is 0x{reserved:02x}, must be 0")
+    return Command(car_id, seq, stamp_s, v_mps, omega_radps, flags, session, source)
 
 
 def seq_after(seq: int, last: int) -> bool:

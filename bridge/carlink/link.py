@@ -4,8 +4,11 @@ The bytes are in :mod:`.codec`, the receiving rules in :mod:`.receiver`; this mo
 moves datagrams between them and UDP sockets.
 
 Sender (:class:`CommandSender`): one datagram per :meth:`~CommandSender.send`, numbered
-and stamped. It keeps no schedule of its own: the car process's control loop calls
-``send()`` at ``control.command_rate_hz`` (50 Hz) on absolute deadlines, and a late tick
+and stamped; version 2 (authenticated, a new session per sender) when it has the car's
+key, version 1 without. :meth:`CommandSender.for_car` picks the version, the key and the
+address from a car's config, so every sender of a car (its car process, an operator's
+e-stop) speaks what the car expects. It keeps no schedule of its own: the car process's
+control loop calls ``send()`` at ``control.command_rate_hz`` (50 Hz) on absolute deadlines, and a late tick
 sends once rather than catching up in a burst (``fleet/ticker.py``). On shutdown it sends
 a few STOP datagrams, with E_STOP if the last command had it.
 
@@ -16,8 +19,6 @@ Receiver (:class:`CommandReceiver`): a bound UDP socket and a reader thread that
 every datagram to a :class:`~.receiver.CommandFilter` and answers PINGs from the same
 socket (mocap_sim's simulated cars use it).
 
-:func:`open_sender` is the one place that turns a car's config into its sender: the car
-process and the operator's tools (``trustfg stop``, ``trustfg check``) all use it.
 """
 
 from __future__ import annotations
@@ -31,7 +32,19 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Callable
 
 from .answer import Answer, decode_answer, encode_answer
-from .codec import SEQ_MODULUS, CarLinkError, Command, Flags, _check_int, encode_command
+from .codec import (
+    SEQ_MODULUS,
+    SESSION_MODULUS,
+    SOURCE_CAR_PROCESS,
+    CarLinkError,
+    Command,
+    Flags,
+    _check_int,
+    check_key,
+    encode_command,
+    encode_command_v2,
+)
+from .keys import link_key
 from .receiver import (
     DEFAULT_RESYNC_AFTER_S,
     DEFAULT_WATCHDOG_TIMEOUT_S,
@@ -45,17 +58,29 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 # recv buffer larger than a datagram, so an oversized datagram is seen (wrong length)
-# rather than silently truncated to 30 bytes.
+# rather than silently truncated to 30 (or 52) bytes.
 _RECV_BUFFER_BYTES = 2048
 
 Clock = Callable[[], float]
+
+_session_lock = threading.Lock()
+_last_session = 0
+
+
+def new_session() -> int:
+    """A version-2 session id: the wall clock in microseconds, strictly increasing within
+    this process (two senders started in the same microsecond still differ)."""
+    global _last_session
+    with _session_lock:
+        _last_session = max(time.time_ns() // 1000, _last_session + 1) % SESSION_MODULUS
+        return _last_session
 
 
 @dataclass(frozen=True)
 class SenderStats:
     """Counts of a :class:`CommandSender`: ``sent`` datagrams handed to the socket (commands
     and STOP datagrams alike), ``send_errors``, datagrams the socket refused, ``answers``
-    received and ``bad_answers`` (invalid, or from another car), dropped."""
+    received and ``bad_answers`` (invalid, forged, from another car or of another session), dropped."""
 
     sent: int = 0
     send_errors: int = 0
@@ -83,16 +108,23 @@ class CommandSender:
     ``stop_repeats`` STOP datagrams, keeping E_STOP if the last command given to
     :meth:`send` had it, so shutting down never releases a car's e-stop; ``close()``
     (also on leaving a ``with`` block) stops and closes the socket. Sequence numbers start
-    at ``first_seq`` and wrap. ``stamp_clock`` stamps datagrams -- pass the fleet clock.
+    at ``first_seq`` and wrap (version 2: a new session instead). ``stamp_clock`` stamps
+    datagrams -- pass the fleet clock. With ``key`` it sends version 2 as ``source``
+    (codec.SOURCE_CAR_PROCESS, SOURCE_OPERATOR, ...) in a session of its own.
     Safe to call from two threads (a control thread sending, the main thread stopping).
     """
 
-    def __init__(self, car_id: int, address: tuple[str, int], *, stamp_clock: Clock = time.monotonic,
+    def __init__(self, car_id: int, address: tuple[str, int], *, key: bytes | None = None,
+                 source: int = SOURCE_CAR_PROCESS, stamp_clock: Clock = time.monotonic,
                  first_seq: int = 0, stop_repeats: int = 3, stop_spacing_s: float = 0.005,
                  send_timeout_s: float = 0.1):
         _check_int("car_id", car_id, 1, 255)
         _check_int("seq", first_seq, 0, SEQ_MODULUS - 1)
+        _check_int("source", source, 0, 255)
         self.car_id = car_id
+        self._key = check_key(key) if key is not None else None
+        self.source = source
+        self.session = new_session() if self._key is not None else 0
         self._stamp_clock = stamp_clock
         self._seq = first_seq
         self._stop_repeats = stop_repeats
@@ -106,6 +138,30 @@ class CommandSender:
         self._send_errors = 0
         self._answers = 0
         self._bad_answers = 0
+
+    @classmethod
+    def for_car(cls, car: "CarConfig", *, source: int = SOURCE_CAR_PROCESS, stamp_clock: Clock = time.time,
+                **options) -> "CommandSender":
+        """The one place that turns a car's config into a sender to it -- the car process's
+        and the operator's tools' (``source=SOURCE_OPERATOR``: trustfg stop, check, go, the
+        dashboard) alike: its ``link`` address, and version 2 with its key unless it asks
+        for version 1. ConfigError for a bad address or a missing or bad key."""
+        from ...agent.config import parse_udp_address  # not at import: trustfg stop's first datagrams go first
+
+        host, port = parse_udp_address(car.link, f"cars[id={car.id}].link")
+        return cls(car.id, (host, port), key=link_key(car), source=source, stamp_clock=stamp_clock, **options)
+
+    @property
+    def version(self) -> int:
+        return 1 if self._key is None else 2
+
+    def renew_session(self) -> None:
+        """Version 2: go on in a new session (seq from 0). An operator's tool does this
+        before a RELEASE, which the car takes only in its source's newest session
+        (receiver, rules 4 and 7): another tool of the operator may have sent since."""
+        with self._lock:
+            if self._key is not None:
+                self.session, self._seq = new_session(), 0
 
     def __enter__(self) -> CommandSender:
         return self
@@ -128,14 +184,18 @@ class CommandSender:
         with self._lock:
             if self._sock is None:
                 raise RuntimeError(f"car {self.car_id}: sender is closed")
-            cmd = Command(self.car_id, self._seq, self._stamp_clock(), v_mps, omega_radps, flags)
+            cmd = Command(self.car_id, self._seq, self._stamp_clock(), v_mps, omega_radps, flags,
+                          self.session, self.source)
             self._seq = (self._seq + 1) % SEQ_MODULUS
+            if self._seq == 0 and self._key is not None:  # version 2 never wraps: a new session
+                self.session = new_session()
             # What the caller asked for, even if the socket fails: stop() keeps an e-stop
             # whose own datagram was lost. A PING is not a command.
             if not cmd.ping:
                 self._last_flags = cmd.flags
+            datagram = encode_command(cmd) if self._key is None else encode_command_v2(cmd, self._key)
             try:
-                self._sock.sendto(encode_command(cmd), self._sockaddr)
+                self._sock.sendto(datagram, self._sockaddr)
             except OSError as exc:
                 self._send_errors += 1
                 log.warning("car %d: send of seq %d failed: %s", self.car_id, cmd.seq, exc)
@@ -144,7 +204,8 @@ class CommandSender:
             return cmd
 
     def answers(self) -> list[Answer]:
-        """The car's answers to our PINGs that have arrived since the last call (never blocks)."""
+        """The car's answers to our PINGs that have arrived since the last call (never blocks):
+        in the link's version, for this car and (version 2) this sender's session."""
         got = []
         with self._lock:
             # The socket has a (send) timeout, under which recv would wait: poll first.
@@ -155,11 +216,11 @@ class CommandSender:
                     log.debug("car %d: reading answers: %s", self.car_id, exc)
                     break
                 try:
-                    answer = decode_answer(data)
+                    answer = decode_answer(data, self._key)
                 except CarLinkError:
                     self._bad_answers += 1
                     continue
-                if answer.car_id != self.car_id:
+                if answer.car_id != self.car_id or answer.session != self.session:
                     self._bad_answers += 1
                     continue
                 self._answers += 1
@@ -198,15 +259,16 @@ class CommandReceiver:
     The socket is bound on construction (``address`` tells the port when 0 was asked
     for); the reader runs between :meth:`start` (or entering a ``with`` block) and
     :meth:`close`. ``clock`` stamps arrivals and is the default ``now`` of
-    :meth:`active_command`.
+    :meth:`active_command`. With ``key`` the car speaks version 2 (see :mod:`.receiver`).
     """
 
-    def __init__(self, car_id: int, bind_address: tuple[str, int], *,
+    def __init__(self, car_id: int, bind_address: tuple[str, int], *, key: bytes | None = None,
                  watchdog_timeout_s: float = DEFAULT_WATCHDOG_TIMEOUT_S,
                  resync_after_s: float = DEFAULT_RESYNC_AFTER_S, clock: Clock = time.monotonic,
                  recv_timeout_s: float = 0.1, join_timeout_s: float = 1.0):
-        self._filter = CommandFilter(car_id, watchdog_timeout_s=watchdog_timeout_s,
+        self._filter = CommandFilter(car_id, key=key, watchdog_timeout_s=watchdog_timeout_s,
                                      resync_after_s=resync_after_s)
+        self._key = check_key(key) if key is not None else None
         self.car_id = car_id
         self._clock = clock
         self._join_timeout_s = join_timeout_s
@@ -304,18 +366,10 @@ class CommandReceiver:
         with self._changed:
             cmd = self._filter.accept(data, now)
             answer = self._filter.answer(cmd, now) if cmd is not None and cmd.ping else None
+            key = self._key
             self._changed.notify_all()
         if answer is not None:
             try:
-                sock.sendto(encode_answer(answer), source)
+                sock.sendto(encode_answer(answer, key), source)
             except OSError as exc:
                 log.debug("car %d: answer to %s failed: %s", self.car_id, source, exc)
-
-
-def open_sender(car: "CarConfig", *, stamp_clock: Clock = time.time, **options) -> CommandSender:
-    """The sender for ``car``'s link, as its config asks (``cars[].link``); ConfigError for
-    a bad address. ``options`` go to :class:`CommandSender`."""
-    from ...agent.config import parse_udp_address  # not at import: trustfg stop's first datagrams go first
-
-    host, port = parse_udp_address(car.link, f"cars[id={car.id}].link")
-    return CommandSender(car.id, (host, port), stamp_clock=stamp_clock, **options)

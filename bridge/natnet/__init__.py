@@ -2,9 +2,10 @@
 
 NatNet is OptiTrack Motive's UDP streaming protocol. This package decodes and encodes its
 messages exactly as laid out by the NatNet SDK (the ``PacketClient.cpp`` and
-``NatNetClient.py`` direct-depacketization samples of SDK 3.x/4.x). Frames of NatNet 3.0,
-3.1, 4.0 and 4.1 are decoded and encoded; frames of the legacy 2.x layouts (2.0 to 2.11,
-tested on 2.5/2.7/2.9 captures) are decoded only. Every decoding problem raises
+``NatNetClient.py`` direct-depacketization samples of SDK 3.x/4.x). Frames and model
+definitions of NatNet 3.0, 3.1, 4.0, 4.1 and 4.2 are decoded and encoded; 4.3 and 4.4 are
+decoded with the 4.2 layout (as the SDK's 2025 sample reads them); frames of the legacy
+2.x layouts (2.0 to 2.11, tested on 2.5/2.7/2.9 captures) are decoded only. Every decoding problem raises
 :class:`NatNetError` (a ``ValueError``) with a ``reason`` for counters; nothing else
 escapes a decoder.
 
@@ -41,7 +42,9 @@ from .common import (
     DEFAULT_STREAM_VERSION,
     DEFAULT_VERSION,
     FRAME_VERSIONS,
+    LATEST_DECODED,
     MAX_PAYLOAD_BYTES,
+    NEWEST_LAYOUT,
     STREAM_VERSIONS,
     V2_5,
     V2_7,
@@ -50,6 +53,7 @@ from .common import (
     V3_1,
     V4_0,
     V4_1,
+    V4_2,
     MessageId,
     NatNetError,
     Version,
@@ -86,7 +90,7 @@ from .sections import AnalogDevice, Asset, LabeledMarker, MarkerSet, RigidBody, 
 
 __all__ = [
     "NatNetError", "MessageId", "Version", "V2_5", "V2_7", "V2_9", "V3_0", "V3_1", "V4_0",
-    "V4_1", "FRAME_VERSIONS", "STREAM_VERSIONS", "DEFAULT_VERSION", "DEFAULT_STREAM_VERSION", "RigidBody", "MarkerSet", "LabeledMarker", "Skeleton", "Asset",
+    "V4_1", "V4_2", "NEWEST_LAYOUT", "LATEST_DECODED", "FRAME_VERSIONS", "STREAM_VERSIONS", "DEFAULT_VERSION", "DEFAULT_STREAM_VERSION", "RigidBody", "MarkerSet", "LabeledMarker", "Skeleton", "Asset",
     "AnalogDevice", "Frame", "ConnectionInfo", "ServerInfo", "ConnectRequest",
     "DiscoveryRequest", "Request", "Response", "MessageString", "KeepAlive", "Disconnect",
     "RequestModelDef", "RequestFrame", "EchoRequest", "EchoResponse", "UnrecognizedRequest",

@@ -99,7 +99,16 @@ class Version:
 _ZERO_VERSION = Version(0, 0, 0, 0)
 V2_5, V2_7, V2_9 = Version(2, 5), Version(2, 7), Version(2, 9)
 V3_0, V3_1, V4_0, V4_1 = Version(3, 0), Version(3, 1), Version(4, 0), Version(4, 1)
-FRAME_VERSIONS = (V3_0, V3_1, V4_0, V4_1)  # decoded and encoded; 2.x is decoded only
+V4_2 = Version(4, 2)
+FRAME_VERSIONS = (V3_0, V3_1, V4_0, V4_1, V4_2)  # decoded and encoded; 2.x is decoded only
+NEWEST_LAYOUT = V4_2
+"""The last layout change the SDK documents: NatNet 4.2 (Motive 3.2) added a rotation to
+the rigid-body description. The SDK's own 2025 depacketizer (NatNetClient.py) reads every
+4.x from 4.2 on with this layout ("4_2_to_current"); so does this codec, up to
+LATEST_DECODED."""
+LATEST_DECODED = Version(4, 4)
+"""The newest version decoded (with the 4.2 layout): OptiTrack's documentation lists 4.4.
+A later one is refused rather than guessed at."""
 STREAM_VERSIONS = tuple(f"{v.major}.{v.minor}" for v in FRAME_VERSIONS)
 """The versions a stream may be configured as, "3.0" ... (command-line choices)."""
 DEFAULT_VERSION = V3_1
@@ -115,6 +124,7 @@ _I32x2 = struct.Struct("<ii")
 _U16 = struct.Struct("<H")
 _F32 = struct.Struct("<f")
 _VEC3 = struct.Struct("<3f")
+_QUAT = struct.Struct("<4f")
 _RB = struct.Struct("<i8fH")  # id, x, y, z, qx, qy, qz, qw, mean error, params: 38 bytes
 _RB_BYTES = _RB.size
 
@@ -239,6 +249,7 @@ class _Layout:
     hires: bool  # 3.0+: three uint64 stamps
     precision: bool  # 4.1+: PTP seconds and fraction
     frame_params: bool  # 2.6+
+    rb_description_rotation: bool  # 4.2+ (MODELDEF): quat after the rigid body's offset
 
     @property
     def rb_min_bytes(self) -> int:
@@ -254,9 +265,10 @@ class _Layout:
 @lru_cache(maxsize=None)
 def _layout(major: int, minor: int) -> _Layout:
     if not (major == 2 and 0 <= minor <= 11 or major == 3 and minor in (0, 1)
-            or major == 4 and minor in (0, 1)):
+            or major == 4 and 0 <= minor <= LATEST_DECODED.minor):
         raise NatNetError(f"unsupported NatNet version {major}.{minor} (frames of 2.x, "
-                          "3.0, 3.1, 4.0 and 4.1 are supported)", "unsupported_version")
+                          f"3.0, 3.1 and 4.0 to {LATEST_DECODED.major}.{LATEST_DECODED.minor} are supported)",
+                          "unsupported_version")
     v = (major, minor)
     return _Layout(
         sizes=v >= (4, 1), rb_markers=v < (3, 0), rb_marker_ids=v >= (2, 0),
@@ -264,11 +276,12 @@ def _layout(major: int, minor: int) -> _Layout:
         labeled=v >= (2, 3), labeled_params=v >= (2, 6), residual=v >= (3, 0),
         force_plates=v >= (2, 9), devices=v >= (2, 11), latency=v < (3, 0),
         timestamp="d" if v >= (2, 7) else ("f" if v >= (2, 6) else ""),
-        hires=v >= (3, 0), precision=v >= (4, 1), frame_params=v >= (2, 6))
+        hires=v >= (3, 0), precision=v >= (4, 1), frame_params=v >= (2, 6),
+        rb_description_rotation=v >= (4, 2))
 
 
 def supports_frames(version: Version) -> bool:
-    """Whether frames of NatNet ``version`` can be decoded (2.x, 3.0, 3.1, 4.0, 4.1)."""
+    """Whether frames of NatNet ``version`` can be decoded (2.x, 3.0, 3.1, 4.0 to 4.4)."""
     try:
         _layout(version.major, version.minor)
     except NatNetError:
@@ -277,7 +290,7 @@ def supports_frames(version: Version) -> bool:
 
 
 def _encode_layout(version: Version) -> _Layout:
-    if (version.major, version.minor) not in ((3, 0), (3, 1), (4, 0), (4, 1)):
+    if Version(version.major, version.minor) not in FRAME_VERSIONS:
         raise NatNetError(f"encoding NatNet {version.major}.{version.minor} is not supported "
-                          "(3.0, 3.1, 4.0, 4.1 are)", "unsupported_version")
+                          f"({', '.join(STREAM_VERSIONS)} are)", "unsupported_version")
     return _layout(version.major, version.minor)

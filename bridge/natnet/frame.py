@@ -1,6 +1,7 @@
 """FRAMEOFDATA (7): one frame of the stream, decoded and encoded.
 
-Frames of NatNet 3.0, 3.1, 4.0 and 4.1 are decoded and encoded; frames of the legacy 2.x
+Frames of NatNet 3.0, 3.1, 4.0, 4.1 and 4.2 are decoded and encoded (4.2 frames are laid
+out as 4.1's: its change is in MODELDEF; 4.3 and 4.4 decode the same); frames of the legacy 2.x
 layouts (2.0 to 2.11, tested on 2.5/2.7/2.9 captures) are decoded only. Which optional
 fields each version carries is ``_layout`` in :mod:`.common`; the items of each section
 (and the rigid body's bytes) are in :mod:`.sections`.
@@ -255,7 +256,7 @@ def _decode_frame(buf: bytes, end: int, lay: _Layout, full: bool) -> Frame:
 
 
 def encode_frame(frame: Frame, version: Version) -> bytes:
-    """The FRAMEOFDATA payload of ``frame`` in NatNet ``version`` (3.0, 3.1, 4.0, 4.1)."""
+    """The FRAMEOFDATA payload of ``frame`` in NatNet ``version`` (3.0, 3.1, 4.0, 4.1, 4.2)."""
     lay = _encode_layout(version)
     try:
         sections = [

@@ -8,7 +8,8 @@ description that follows] and the description:
 kind                  layout
 ====================  ======================================================================
 0 marker set          cstring name, int32 m, m x cstring marker name
-1 rigid body          cstring name (2.0+), int32 id, int32 parent id, vec3 offset;
+1 rigid body          cstring name (2.0+), int32 id, int32 parent id, vec3 offset,
+                      [4.2+: quat rotation (qx, qy, qz, qw): the pivot's orientation];
                       3.0+: int32 m, m x vec3 marker offsets, m x int32 active labels,
                       4.0+: m x cstring marker names
 2 skeleton            cstring name, int32 id, int32 r, r x rigid body description
@@ -26,8 +27,11 @@ kind                  layout
 Marker sets and rigid bodies are decoded; the other kinds are walked by their layout (or
 by their 4.1 byte size) and kept as :class:`OtherDescription` (kind and name).
 
-A NatNet version whose frame layout is unknown (see ``_layout`` in :mod:`.common`) is
-rejected here too; MODELDEF is encoded in NatNet 3.0, 3.1, 4.0 and 4.1.
+The 4.2 rotation is the one change of the rigid-body description since 4.0; the SDK's
+NatNetClient.py (``__unpack_rigid_body_descript_4_2_to_current``) and PacketClient.cpp
+read it there, and a parser that does not reads the following marker count from the
+quaternion's bytes. A NatNet version whose frame layout is unknown (see ``_layout`` in
+:mod:`.common`) is rejected here too; MODELDEF is encoded in NatNet 3.0 to 4.2.
 """
 
 from __future__ import annotations
@@ -38,8 +42,10 @@ from typing import Union
 
 from .common import (
     _I32,
+    _QUAT,
     _VEC3,
     NatNetError,
+    Quat,
     Vec3,
     Version,
     _as_bytes,
@@ -70,11 +76,14 @@ class RigidBodyMarker:
 
 @dataclass(frozen=True)
 class RigidBodyDescription:
+    """A rigid body as Motive describes it; ``rotation`` is on the wire from NatNet 4.2."""
+
     name: str
     id: int
     parent_id: int = -1
     offset: Vec3 = (0.0, 0.0, 0.0)
     markers: tuple[RigidBodyMarker, ...] = ()
+    rotation: Quat = (0.0, 0.0, 0.0, 1.0)
 
 
 @dataclass(frozen=True)
@@ -112,6 +121,12 @@ def _rb_description(buf: bytes, off: int, end: int,
         raise NatNetError("truncated rigid body description", "truncated")
     rb_id, parent, ox, oy, oz = struct.unpack_from("<ii3f", buf, off)
     off += 20
+    rotation: Quat = (0.0, 0.0, 0.0, 1.0)
+    if _layout(version.major, version.minor).rb_description_rotation:
+        if off + 16 > end:
+            raise NatNetError("truncated rigid body description rotation", "truncated")
+        rotation = _QUAT.unpack_from(buf, off)
+        off += 16
     markers: tuple[RigidBodyMarker, ...] = ()
     if version.major >= 3:
         m, off = _count(buf, off, end, 16 + (1 if version.major >= 4 else 0),
@@ -124,7 +139,7 @@ def _rb_description(buf: bytes, off: int, end: int,
             for i in range(m):
                 names[i], off = _cstring(buf, off, end, "rigid body marker name")
         markers = tuple(RigidBodyMarker(o, lab, nm) for o, lab, nm in zip(offsets, labels, names))
-    return RigidBodyDescription(name, rb_id, parent, (ox, oy, oz), markers), off
+    return RigidBodyDescription(name, rb_id, parent, (ox, oy, oz), markers, rotation), off
 
 
 def _marker_set_description(buf: bytes, off: int, end: int) -> tuple[MarkerSetDescription, int]:
@@ -182,7 +197,7 @@ def _other_description(kind: int, buf: bytes, off: int, end: int,
 
 
 def decode_model_def(payload: bytes | memoryview, version: Version) -> ModelDef:
-    """MODELDEF payload of NatNet ``version`` (2.x, 3.0, 3.1, 4.0, 4.1)."""
+    """MODELDEF payload of NatNet ``version`` (2.x, 3.0, 3.1, 4.0 to 4.4)."""
     _layout(version.major, version.minor)  # rejects versions whose layout we do not know
     buf = _as_bytes(payload)
     end = len(buf)
@@ -228,6 +243,8 @@ def _encode_description(d: Description, version: Version) -> tuple[int, bytes]:
     if isinstance(d, RigidBodyDescription):
         out = _name_bytes(d.name, "rigid body name") + struct.pack(
             "<ii3f", d.id, d.parent_id, *d.offset)
+        if _layout(version.major, version.minor).rb_description_rotation:
+            out += _QUAT.pack(*d.rotation)
         out += _I32.pack(len(d.markers))
         out += b"".join(_VEC3.pack(*m.offset) for m in d.markers)
         out += b"".join(_I32.pack(m.active_label) for m in d.markers)
@@ -239,7 +256,7 @@ def _encode_description(d: Description, version: Version) -> tuple[int, bytes]:
 
 
 def encode_model_def(model: ModelDef, version: Version) -> bytes:
-    """MODELDEF payload (marker sets and rigid bodies) in NatNet 3.0, 3.1, 4.0 or 4.1."""
+    """MODELDEF payload (marker sets and rigid bodies) in NatNet 3.0, 3.1, 4.0, 4.1 or 4.2."""
     lay = _encode_layout(version)
     parts = [_I32.pack(len(model.descriptions))]
     try:

@@ -3,11 +3,13 @@
 import json
 import time
 
+import numpy as np
 import pytest
 
-from tests.conftest import free_tcp_port, wait_for
+from tests.conftest import free_tcp_port, free_udp_port, wait_for
 from trustfg.agent import messages
 from trustfg.agent.config import BusConfig
+from trustfg.agent.gp import Plan
 from trustfg.fleet.bus import BusError, FleetBus, zenoh_config
 from trustfg.fleet.keys import parse_key
 
@@ -44,18 +46,39 @@ def test_messages_flow_between_two_cars_and_the_sender_comes_from_the_key():
         assert not one.drain() or all(r.sender == 2 for r in one.drain())  # never our own
 
 
-def test_a_late_joiner_gets_the_latest_plan_at_once():
+def udp_endpoint():
+    return f"udp/127.0.0.1:{free_udp_port()}?rel=0"
+
+
+def test_with_a_udp_endpoint_peers_get_a_best_effort_link_and_plans_arrive():
+    """Plans are best effort (a lost one is replaced by the next, never retransmitted):
+    Zenoh sends them on the peers' UDP link, the reliable traffic on TCP."""
+    a, a_udp = endpoint(), udp_endpoint()
+    with FleetBus(BusConfig(listen=(a, a_udp)), FLEET, 1) as one, \
+            FleetBus(BusConfig(listen=(endpoint(), udp_endpoint()), connect=(a, a_udp)), FLEET, 2) as two:
+        assert wait_for(lambda: one.alive.get(2) and two.alive.get(1))
+        assert wait_for(lambda: {reliable for *_, reliable in two.links()} == {True, False}, 5.0), two.links()
+        assert any(src.startswith("udp/") and not reliable for src, _, reliable in two.links())
+        plan = messages.encode(messages.PlanMessage(1, 7, time.time(), Plan(0.0, 0.5, np.zeros((3, 2)),
+                                                                            np.zeros((3, 2))), (1.0, 1.0)))
+        got = []
+        assert wait_for(lambda: (one.publish("plan", plan), got.extend(two.drain()),
+                                 any(r.kind == "plan" for r in got))[2], 5.0)
+
+
+def test_a_late_joiner_gets_the_latest_new_plan_at_once_and_repeats_go_best_effort():
     a = endpoint()
-    plan = messages.encode(messages.PlanMessage(1, 7, time.time(), __import__("agent.gp").gp.Plan(
-        0.0, 0.5, __import__("numpy").zeros((3, 2)), __import__("numpy").zeros((3, 2))), (1.0, 1.0)))
+    plan = messages.encode(messages.PlanMessage(1, 7, time.time(), Plan(0.0, 0.5, np.zeros((3, 2)),
+                                                                        np.zeros((3, 2))), (1.0, 1.0)))
     with FleetBus(BusConfig(listen=(a,)), FLEET, 1) as one:
         one.publish("plan", b"old")
         one.publish("plan", plan)
+        one.publish("plan", b"a repeat, best effort only", repeat=True)
         with FleetBus(BusConfig(listen=(endpoint(),), connect=(a,)), FLEET, 3) as late:
             got = []
             assert wait_for(lambda: (got.extend(late.drain()), any(r.kind == "plan" for r in got))[1], 5.0)
-            plans = [r for r in got if r.kind == "plan"]
-            assert plans[-1].payload == plan and all(r.payload != b"old" for r in plans)
+            plans = [r.payload for r in got if r.kind == "plan"]
+            assert plans[-1] == plan and b"old" not in plans  # the reliable path's cache: the latest
 
 
 def test_liveliness_reports_a_departed_car():

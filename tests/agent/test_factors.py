@@ -9,7 +9,14 @@ from gtsam.symbol_shorthand import V, X
 
 from trustfg.agent import factors
 from trustfg.agent.gp import interpolation_weights
-from trustfg.agent.planner import BatchedIntervals, _batched_interval_error, _check_error, _consistency_error
+from trustfg.agent.interval_factors import (
+    BatchedIntervals,
+    _check_error,
+    _chunk_error,
+    _consistency_error,
+    chunk_bounds,
+    chunk_keys,
+)
 
 H = 1e-7
 
@@ -116,11 +123,10 @@ def test_gtsam_custom_factors_linearise_to_the_numerical_jacobian(intersection_s
     for i in range(n):
         values.insert(X(i), positions[i])
         values.insert(V(i), velocities[i])
-    sigmas = np.ones(problem.rows)
-    batch = BatchedIntervals(problem, n)
-    model = gtsam.noiseModel.Diagonal.Sigmas(sigmas)
-    factor_list = [gtsam.CustomFactor(model, [X(i), V(i), X(i + 1), V(i + 1)],
-                                      functools.partial(_batched_interval_error, batch, i)) for i in range(n - 1)]
+    batch = BatchedIntervals(problem, n, 3)  # chunks of intervals [0, 3) and [3, 4)
+    factor_list = [gtsam.CustomFactor(gtsam.noiseModel.Unit.Create((end - first) * problem.rows),
+                                      chunk_keys(first, end), functools.partial(_chunk_error, batch, f))
+                   for f, (first, end) in enumerate(batch.chunks)]
     check_model = gtsam.noiseModel.Diagonal.Sigmas(np.ones(problem.n_peers + 4))
     factor_list.append(gtsam.CustomFactor(check_model, [X(2), V(2)], functools.partial(_check_error, problem, 2, 0)))
     factor_list.append(gtsam.CustomFactor(gtsam.noiseModel.Unit.Create(1), [V(1), V(2)],
@@ -140,23 +146,36 @@ def test_gtsam_custom_factors_linearise_to_the_numerical_jacobian(intersection_s
                 assert np.allclose(jacobian[:, 2 * column + d], numeric, atol=1e-5), (factor, key, d)
 
 
+def test_chunks_cover_every_interval_once():
+    assert chunk_bounds(40, 4) == [(i, i + 4) for i in range(0, 40, 4)]
+    assert chunk_bounds(7, 3) == [(0, 3), (3, 6), (6, 7)]
+    assert chunk_bounds(2, 5) == [(0, 2)]
+    assert chunk_keys(3, 5) == [X(3), V(3), X(4), V(4), X(5), V(5)]
+
+
 def test_batched_cache_never_serves_stale_slices(intersection_sdf):
     rng = np.random.default_rng(10)
-    n = 4
+    n = 7
     problem = make_problem(rng, intersection_sdf, n - 1, 1)
-    batch = BatchedIntervals(problem, n)
+    batch = BatchedIntervals(problem, n, 2)
     values = gtsam.Values()
     for i in range(n):
         values.insert(X(i), rng.uniform(-1, 1, 2))
         values.insert(V(i), rng.normal(0, 0.3, 2))
-    first, _ = batch.interval(1, values, False)
+    batch.chunk(1, values, False)
     changed = gtsam.Values(values)
-    changed.update(X(2), values.atVector(X(2)) + 0.3)
-    second, _ = batch.interval(1, changed, False)
+    changed.update(X(2), values.atVector(X(2)) + 0.3)  # a state of chunk 1 (intervals 2, 3)
     pos = gtsam.utilities.extractVectors(changed, "x")
     vel = gtsam.utilities.extractVectors(changed, "v")
-    want, _ = factors.evaluate_intervals(problem, pos, vel, jacobians=False)
-    assert np.allclose(second, want[1])
-    # Unchanged intervals are served from the cache but equal a fresh evaluation.
-    third, _ = batch.interval(0, changed, False)
-    assert np.allclose(third, want[0])
+    want, jac = factors.evaluate_intervals(problem, pos, vel)
+    for f, (first, end) in enumerate(batch.chunks):
+        residual, blocks = batch.chunk(f, changed, True)
+        assert np.allclose(residual, want[first:end].ravel())
+        # Interval l of the chunk: its rows in the blocks of its own two states, zeros elsewhere.
+        dense = np.stack(list(blocks)).reshape(2 * (end - first + 1), end - first, problem.rows, 2)
+        for local, i in enumerate(range(first, end)):
+            for j in range(4):
+                assert np.array_equal(dense[2 * local + j, local], jac[i, :, j])
+            others = [q for q in range(len(dense)) if not 2 * local <= q < 2 * local + 4]
+            assert not dense[others, local].any()
+    assert batch.evaluations == 2

@@ -70,3 +70,15 @@ def test_run_summary_has_every_documented_key(intersection):
         assert key in run
     assert np.allclose(np.diag(run["min_distance"]), 0.0)
     assert len(run["trust"]) == 2
+
+
+def test_the_fair_off_keeps_eps_0_from_every_peer_where_trust_starts_wider(intersection):
+    from trustfg.fleet.experiments import EXPERIMENTS
+
+    short = dataclasses.replace(intersection, sim=dataclasses.replace(intersection.sim, timeout_s=3.0))
+    eps_0 = intersection.safety.epsilon_0(0.1, 0.1)
+    off_diagonal = ~np.eye(len(intersection.cars), dtype=bool)
+    fixed = simulate(EXPERIMENTS["proximity"].variants["fixed"](short), 3).epsilon[:, off_diagonal]
+    on = simulate(EXPERIMENTS["proximity"].variants["on"](short), 3).epsilon[:, off_diagonal]
+    assert np.allclose(fixed, eps_0)
+    assert on[0].min() > 1.2 * eps_0  # trust starts at the prior (2/3): a wider berth until it grows

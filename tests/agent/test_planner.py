@@ -5,7 +5,7 @@ import pytest
 
 from trustfg.agent.config import PlannerConfig, SafetyConfig
 from trustfg.agent.gp import Plan
-from trustfg.agent.planner import PeerConstraint, PlanningError, PlanRequest, plan_trajectory
+from trustfg.agent.planner import PeerConstraint, PlanningError, PlanRequest, peers_within_reach, plan_trajectory
 
 EPS_OBSTACLE = SafetyConfig().epsilon_obstacle(0.1)
 EPS_0 = SafetyConfig().epsilon_0(0.1, 0.1)
@@ -112,3 +112,56 @@ def test_bad_peer_epsilon_is_refused(intersection_sdf):
     req = request(*LANES[0], peers=(PeerConstraint(crossing_peer(), -1.0),))
     with pytest.raises(PlanningError):
         plan_trajectory(req, PlannerConfig(), intersection_sdf)
+
+
+def test_chunked_factors_give_the_plan_of_one_factor_per_interval(intersection_sdf):
+    """Chunking changes how GTSAM calls our factors, not the problem it solves."""
+    req = request(*LANES[0], peers=(PeerConstraint(crossing_peer(6.0), EPS_0),))
+    one = plan_trajectory(req, PlannerConfig(support_states=23, intervals_per_factor=1), intersection_sdf)
+    for per_factor in (3, 5, 22):
+        chunked = plan_trajectory(req, PlannerConfig(support_states=23, intervals_per_factor=per_factor),
+                                  intersection_sdf)
+        assert chunked.initial_error == pytest.approx(one.initial_error, rel=1e-9)
+        assert chunked.iterations == one.iterations
+        assert np.allclose(chunked.plan.positions, one.plan.positions, atol=1e-6)
+
+
+def standing_peer(position, epsilon=EPS_0):
+    return PeerConstraint(Plan(0.0, 1.0, np.tile(position, (3, 1)), np.zeros((3, 2))), epsilon)
+
+
+def reach_times(horizon):
+    """Check times (I, K) from 0 to ``horizon``."""
+    return np.linspace(0.0, horizon, 32).reshape(8, 4)
+
+
+def test_peers_out_of_reach_by_both_speed_bounds_are_left_out():
+    config = PlannerConfig(max_speed_mps=0.5, reach_margin_m=0.2)
+    times = reach_times(4.0)  # H = 4 s: together the cars close in by at most 4 m
+    reach = EPS_0 + 0.2 + 2 * 0.5 * 4.0
+    near = standing_peer(np.array([reach - 0.01, 0.0]))
+    far = standing_peer(np.array([reach + 0.01, 0.0]))
+    wide = standing_peer(np.array([reach + 0.01, 0.0]), epsilon=2 * EPS_0)
+    kept = peers_within_reach((near, far, wide), np.zeros(2), times, config)
+    assert [id(peer) for peer, _ in kept] == [id(near), id(wide)]
+    (_, positions), _ = kept
+    assert positions.shape == (*times.shape, 2)
+
+
+def test_a_far_peer_whose_plan_comes_fast_is_kept():
+    """Its plan breaks the speed bound: the graph would use it, so it stays."""
+    config = PlannerConfig(max_speed_mps=0.5, reach_margin_m=0.2)
+    start = np.array([20.0, 0.0])
+    rushing = PeerConstraint(Plan(0.0, 4.0, np.array([start, [0.5, 0.0]]), np.array([[-5.0, 0.0], [0.0, 0.0]])), EPS_0)
+    kept = peers_within_reach((rushing, standing_peer(start)), np.zeros(2), reach_times(4.0), config)
+    assert [id(peer) for peer, _ in kept] == [id(rushing)]
+
+
+def test_the_planner_counts_and_ignores_peers_out_of_reach(intersection_sdf):
+    start, goal = LANES[0]
+    far = standing_peer(np.array([40.0, 40.0]))
+    crossing = PeerConstraint(crossing_peer(6.0), EPS_0)
+    alone = plan_trajectory(request(start, goal, peers=(crossing,)), PlannerConfig(), intersection_sdf)
+    both = plan_trajectory(request(start, goal, peers=(far, crossing)), PlannerConfig(), intersection_sdf)
+    assert both.peers_out_of_reach == 1 and alone.peers_out_of_reach == 0
+    assert np.allclose(both.plan.positions, alone.plan.positions, atol=1e-9)

@@ -1,6 +1,8 @@
 """Car-link answers to PING datagrams: the bytes (golden, the docstring's example), the
 decoder's rejections, and a car on loopback answering the sender that pinged it."""
 
+import hashlib
+import hmac
 import re
 import socket
 import struct
@@ -14,6 +16,7 @@ from tests.bridge.carlink_helpers import CAR, datagram
 from tests.conftest import wait_for
 from trustfg.bridge.carlink import (
     ANSWER_SIZE,
+    ANSWER_V2_SIZE,
     Answer,
     CarLinkError,
     CarState,
@@ -22,6 +25,7 @@ from trustfg.bridge.carlink import (
     Flags,
     decode_answer,
     encode_answer,
+    new_key,
 )
 from trustfg.bridge.carlink import answer as answer_module
 
@@ -94,3 +98,38 @@ def test_the_sender_drops_answers_from_another_car_or_garbage():
             assert wait_for(lambda: got.extend(sender.answers()) or len(got) + sender.stats.bad_answers >= 4, 2.0)
             assert [a.car_id for a in got] == [CAR]
             assert sender.stats.bad_answers == 3
+
+
+def test_a_version_2_answer_is_the_documented_layout_with_the_cars_mac():
+    """Built by hand from answer.py's table and the standard library's HMAC."""
+    key = bytes(range(32))
+    answer = Answer(3, 7, 12.5, CarState.E_STOP_LATCHED, session=1_700_000_000_000_000, source=1)
+    body = (b"TA" + bytes([2, 3, 1, 0]) + struct.pack("<HQId", 1, 1_700_000_000_000_000, 7, 12.5))
+    data = body + hmac.new(key, body, hashlib.sha256).digest()[:16]
+    assert encode_answer(answer, key) == data and len(data) == ANSWER_V2_SIZE
+    assert decode_answer(data, key) == answer
+    with pytest.raises(CarLinkError) as wrong_key:
+        decode_answer(data, new_key())
+    assert wrong_key.value.reason == "mac"
+    with pytest.raises(CarLinkError):
+        decode_answer(data)  # a version-1 reader: wrong length
+
+
+def test_a_version_2_car_answers_its_sender_only_in_that_senders_session():
+    key = new_key()
+    with CommandReceiver(CAR, ("127.0.0.1", 0), key=key) as car, \
+            CommandSender(CAR, car.address, key=key, source=1, stamp_clock=lambda: 42.0, stop_repeats=0) as operator, \
+            CommandSender(CAR, car.address, key=new_key(), source=1, stop_repeats=0) as impostor:
+        operator.send(0.0, 0.0, Flags.E_STOP | Flags.STOP | Flags.PING)
+        got = []
+        assert wait_for(lambda: got.extend(operator.answers()) or got, 2.0)
+        assert got[0].e_stop_latched and (got[0].session, got[0].source) == (operator.session, 1)
+        impostor.send(0.0, 0.0, Flags.PING)  # a forged PING: dropped by the car, never answered
+        assert car.wait_until(lambda c: c.decode_errors.get("mac", 0) == 1, 2.0)
+        operator.renew_session()  # an answer to the old session is no longer ours
+        operator.send(0.0, 0.0, Flags.STOP | Flags.RELEASE)
+        operator.send(0.0, 0.0, Flags.PING)
+        got = []
+        assert wait_for(lambda: got.extend(operator.answers()) or got, 2.0)
+        assert not got[0].e_stop_latched and got[0].session == operator.session
+        assert impostor.answers() == [] and operator.stats.bad_answers == 0

@@ -180,7 +180,7 @@ def test_handshake_timeout_is_a_clear_error():
         assert time.monotonic() - start < 2.0
         assert server.wait_for(MessageId.CONNECT, count=2)  # CONNECT is resent
         connect = nn.deserialize(server.received[0][1], V3_0)
-        assert connect.client_name == "trustfg" and connect.natnet_version == V4_1
+        assert connect.client_name == "trustfg" and connect.natnet_version == nn.NEWEST_LAYOUT == Version(4, 2)
 
 
 def test_unicast_handshake_frames_keepalive_reconnect_and_disconnect(traffic):
@@ -213,7 +213,7 @@ def test_unicast_handshake_frames_keepalive_reconnect_and_disconnect(traffic):
 
 
 @pytest.mark.parametrize("info, match", [(server_info(V3_0, multicast=True), "multicast"),
-                                         (server_info(Version(4, 2)), "4.2")])
+                                         (server_info(Version(5, 0)), "5.0")])
 def test_server_info_that_the_client_cannot_use(info, match):
     with FakeServer(lambda packet, sender: [info]) as server:
         with pytest.raises(NatNetConnectionError, match=match):

@@ -310,12 +310,14 @@ def test_non_finite_values_where_they_matter():
 def test_trailing_bytes_and_unsupported_versions():
     packet = nn.serialize(Frame(1, (), 0.0), V3_0)
     assert reason_of(nn.pack_header(7, packet[4:] + b"\0\0")) == "trailing_bytes"
-    for version in (Version(4, 2), Version(1, 0), Version(5, 0)):
+    for version in (Version(4, 5), Version(1, 0), Version(5, 0)):
         assert reason_of(packet, version) == "unsupported_version"
         assert not nn.supports_frames(version)
         with pytest.raises(NatNetError):
             nn.encode_frame(Frame(1), version)
-    assert all(nn.supports_frames(v) for v in nn.FRAME_VERSIONS + (nn.V2_5, nn.V2_9))
+    assert all(nn.supports_frames(v) for v in nn.FRAME_VERSIONS + (nn.V2_5, nn.V2_9, Version(4, 3), Version(4, 4)))
+    with pytest.raises(NatNetError):  # decoded with the 4.2 layout, never encoded
+        nn.encode_frame(Frame(1), Version(4, 4))
 
 
 def test_encoder_errors_are_natnet_errors():

@@ -35,7 +35,7 @@ def model(names: bool) -> nn.ModelDef:
                         nn.MarkerSetDescription("all")))
 
 
-@pytest.mark.parametrize("version, names", [(V3_0, False), (V3_1, False), (V4_0, True),
+@pytest.mark.parametrize("version, names", [(V3_0, False), (V3_1, False), (V4_0, True), (nn.V4_2, True),
                                             (V4_1, True)])
 def test_model_def_round_trips(version, names):
     m = model(names)

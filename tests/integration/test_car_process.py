@@ -1,4 +1,5 @@
-"""One car process against a NatNet server and a car link played by the test."""
+"""One car process against a NatNet server and a car link played by the test (the
+authenticated link, version 2, with a key made for the test)."""
 
 import dataclasses
 import json
@@ -13,15 +14,17 @@ from tests.conftest import wait_for
 from trustfg.agent import messages
 from trustfg.agent.scenario_files import dump_scenario
 from trustfg.bridge import natnet
-from trustfg.bridge.carlink import CommandReceiver
+from trustfg.bridge.carlink import CommandReceiver, link_key, new_key
 from trustfg.fleet.bus import FleetBus
 from trustfg.fleet.launch import free_port, loopback_fleet
+from trustfg.fleet.link_keys import with_link_keys
 from trustfg.mocap_sim.natnet_server import NatNetServer, NatNetServerOptions
 
 
 @pytest.fixture
 def one_car(intersection, tmp_path):
     fleet = loopback_fleet(dataclasses.replace(intersection, cars=intersection.cars[:1]), None, None, 0.0)
+    fleet = with_link_keys(fleet, tmp_path / "keys")
     path = tmp_path / "fleet.toml"
     path.write_text(dump_scenario(fleet))
     return fleet, path
@@ -44,7 +47,7 @@ def test_car_process_stops_without_pose_drives_after_start_and_stops_on_sigterm(
     stats = tmp_path / "stats.json"
     observer = f"tcp/127.0.0.1:{free_port()}"
     with NatNetServer(options, served(car, lambda: tracked["on"])), \
-            CommandReceiver(car.id, (host, int(port))) as link, \
+            CommandReceiver(car.id, (host, int(port)), key=link_key(car)) as link, \
             FleetBus(fleet.bus, fleet.fleet, None, listen=(observer,)) as bus:
         process = subprocess.Popen([sys.executable, "-m", "trustfg", "car", "--id", str(car.id), "--config",
                                     str(path), "--stats", str(stats)], stderr=subprocess.PIPE, text=True)
@@ -77,3 +80,28 @@ def test_car_process_stops_without_pose_drives_after_start_and_stops_on_sigterm(
     summary = json.loads(stats.read_text())
     assert summary["control"]["stale_pose_stops"] > 0
     assert summary["control"]["sent"] > 20 and summary["control"]["rate_hz"] > 25  # 50 Hz from its first moment (loaded: fewer)
+
+
+def test_a_car_with_another_key_hears_nothing_from_the_car_process(one_car, tmp_path):
+    """The mechanism: the car process's datagrams verify only with the car's own key."""
+    fleet, path = one_car
+    car = fleet.cars[0]
+    options = NatNetServerOptions(address="127.0.0.1", command_port=fleet.natnet.command_port, multicast=False,
+                                  data_port=0, natnet_version=natnet.V3_1)
+    host, port = car.link[len("udp://"):].rsplit(":", 1)
+    with NatNetServer(options, served(car, lambda: True)), \
+            CommandReceiver(car.id, (host, int(port)), key=new_key()) as link:
+        process = subprocess.Popen([sys.executable, "-m", "trustfg", "car", "--id", str(car.id), "--config",
+                                    str(path)], stderr=subprocess.PIPE, text=True)
+        try:
+            assert link.wait_until(lambda c: c.decode_errors.get("mac", 0) >= 20, 20.0), process.stderr
+            assert link.counters.accepted == 0 and link.last_command is None
+        finally:
+            process.send_signal(signal.SIGTERM)
+            try:
+                process.wait(timeout=5)
+            finally:
+                if process.poll() is None:
+                    process.kill()
+                    process.wait()
+                process.stderr.close()

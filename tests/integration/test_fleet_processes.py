@@ -35,6 +35,10 @@ def test_four_car_processes_reach_their_goals_without_breach(honest):
     for car in map(str, summary["car_ids"]):
         assert summary["replan_ms"][car]["count"] > 10
         assert summary["control"][car]["sent"] > 100
+        # Its CPU, from /proc: a planning car is busy, but far from a whole core.
+        cpu = summary["cpu"][f"car {car}"]
+        assert 0.01 < cpu["share"] < 1.0 and cpu["share_go_first_arrival"] > 0.01, cpu
+    assert summary["cpu"]["mocap-sim"]["cpu_s"] > 0 and summary["cpu"]["launcher"]["cpu_s"] > 0
 
 
 def test_honest_cars_distrust_a_liar_over_the_network(liar):

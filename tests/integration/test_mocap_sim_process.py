@@ -16,12 +16,14 @@ from trustfg.bridge import natnet
 from trustfg.bridge.carlink import CommandSender
 from trustfg.bridge.natnet_client import NatNetClient, NatNetClientOptions
 from trustfg.fleet.launch import loopback_fleet
+from trustfg.fleet.link_keys import with_link_keys
 from trustfg.fleet.ticker import ticks
 
 
 @pytest.fixture
 def two_cars(intersection, tmp_path):
     fleet = loopback_fleet(dataclasses.replace(intersection, cars=intersection.cars[:2]), None, None, 0.0)
+    fleet = with_link_keys(fleet, tmp_path / "keys")
     path = tmp_path / "fleet.toml"
     path.write_text(dump_scenario(fleet))
     return fleet, path
@@ -73,7 +75,7 @@ def truth_rows(path, car_id):
         return [row for row in csv.DictReader(f) if int(row["car_id"]) == car_id]
 
 
-@pytest.mark.parametrize("version", ["3.0", "3.1", "4.0", "4.1"])
+@pytest.mark.parametrize("version", list(natnet.STREAM_VERSIONS))
 def test_bridge_reads_mocap_sim_poses_in_every_natnet_version(two_cars, tmp_path, version):
     fleet, path = two_cars
     process = start_mocap(path, tmp_path / "truth.csv", "--natnet-version", version)
@@ -99,7 +101,7 @@ def test_a_mocap_sim_car_obeys_commands_and_stops_by_itself(two_cars, tmp_path):
     car = fleet.cars[0]
     host, port = car.link[len("udp://"):].rsplit(":", 1)
     try:
-        with CommandSender(car.id, (host, int(port))) as sender:
+        with CommandSender.for_car(car) as sender:
             with streaming(sender, 0.3, 0.0):
                 assert wait_for(lambda: (rows := truth_rows(truth, car.id)) and float(rows[-1]["v"]) > 0.29, 5.0)
             silent_from = time.time()

@@ -1,0 +1,49 @@
+"""CPU of a car process at steady state, with 3, 7 and 15 peers.
+
+    python benchmarks/bench_cpu.py [--scenes circle-4 circle-8 circle-16] [--seed 0]
+
+Runs ``trustfg sim`` (mocap-sim and one OS process per car on this machine, no dashboard)
+on each scene and reads every process's CPU from /proc (fleet.cpu: utime + stime of the
+process and all its threads). Steady state is the window from the start message (every
+car plans against every peer from then on, including the ones still waiting to depart)
+to the first car's arrival (from then on the fleet thins out); a car's share of one
+core is its CPU time over that window divided by the window's wall time. Printed per
+scene: the mean, min and max over the car processes, and the sum over every process of
+the run (mocap-sim, the launcher and the cars) against the machine's cores -- near the
+core count the cars were starved and their shares are capped, not their demand.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import tempfile
+from pathlib import Path
+
+from trustfg.agent.scenario_files import load_scenario
+from trustfg.fleet.launch import loopback_fleet, run
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--scenes", nargs="+", default=["circle-4", "circle-8", "circle-16"],
+                        help="shipped scene names or files (default: %(default)s)")
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args()
+    print(f"car process CPU, share of one core from the go to the first arrival ({os.cpu_count()} cores)")
+    print(f"{'scene':>16} {'peers':>5} {'mean':>6} {'min':>6} {'max':>6} {'all processes':>14} {'replan p95 ms':>14}")
+    for name in args.scenes:
+        scenario = loopback_fleet(load_scenario(name), None, None, 0.0)
+        with tempfile.TemporaryDirectory() as folder:
+            summary = run(scenario, Path(folder), seed=args.seed)
+        window = "share_go_first_arrival"
+        cars = [summary["cpu"][f"car {i}"][window] for i in summary["car_ids"]]
+        total = sum(entry[window] or 0.0 for entry in summary["cpu"].values() if entry)
+        p95 = max(r["p95"] for r in summary["replan_ms"].values() if r)
+        print(f"{scenario.name:>16} {len(cars) - 1:>5} {statistics.mean(cars):>6.3f} {min(cars):>6.3f} "
+              f"{max(cars):>6.3f} {total:>14.2f} {p95:>14.1f}")
+
+
+if __name__ == "__main__":
+    main()

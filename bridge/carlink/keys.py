@@ -1,0 +1,80 @@
+"""Car-link keys: where a car's 32-byte key comes from, and how a new one is made.
+
+A key is 32 random bytes, written as 64 hexadecimal digits (whitespace ignored) in a key
+file of its own (``cars[].link_key_file``; readable by its owner only, never committed) or,
+for throw-away runs, inline (``cars[].link_key``). The car's firmware holds the same bytes.
+``trustfg sim`` makes fresh keys for every run (fleet.link_keys).
+
+    python3 -c "import secrets; print(secrets.token_hex(32))" > car1.key && chmod 600 car1.key
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import secrets
+import stat
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from .codec import KEY_BYTES
+
+if TYPE_CHECKING:
+    from ...agent.config import CarConfig
+
+
+def _config_error(message: str) -> Exception:
+    # the typed config loads lazily: trustfg stop reads keys before it (fleet.link_stop)
+    from ...agent.config import ConfigError
+
+    return ConfigError(message)
+
+log = logging.getLogger(__name__)
+
+
+def parse_key(text: str, where: str) -> bytes:
+    """A key from its hexadecimal text; ConfigError naming ``where`` if it is not 32 bytes."""
+    digits = "".join(text.split())
+    try:
+        key = bytes.fromhex(digits)
+    except ValueError:
+        raise _config_error(f"{where}: a car-link key is {2 * KEY_BYTES} hexadecimal digits") from None
+    if len(key) != KEY_BYTES:
+        raise _config_error(f"{where}: a car-link key is {KEY_BYTES} bytes ({2 * KEY_BYTES} hex digits), "
+                          f"got {len(key)}")
+    return key
+
+
+def link_key(car: "CarConfig") -> bytes | None:
+    """The key the car's link uses: None for version 1; for version 2 its key file's (or
+    inline) key, or a ConfigError saying what to configure."""
+    where = f"cars[id={car.id}]"
+    if car.link_version == 1:
+        return None
+    if car.link_key_file:
+        path = Path(car.link_key_file).expanduser()
+        try:
+            text = path.read_text()
+            mode = path.stat().st_mode
+        except OSError as exc:
+            raise _config_error(f"{where}.link_key_file: cannot read {path}: {exc.strerror}") from None
+        if mode & (stat.S_IRWXG | stat.S_IRWXO):
+            log.warning("%s.link_key_file %s is readable by others (chmod 600 it)", where, path)
+        return parse_key(text, f"{where}.link_key_file ({path})")
+    if car.link_key:
+        return parse_key(car.link_key, f"{where}.link_key")
+    raise _config_error(f"{where}: the car link (version 2, authenticated) needs the car's key: set "
+                      f"link_key_file (or link_version = 1 for old firmware without authentication)")
+
+
+def new_key() -> bytes:
+    return secrets.token_bytes(KEY_BYTES)
+
+
+def write_key_file(path: Path, key: bytes) -> Path:
+    """Write ``key`` as hex to a new file only its owner may read."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    with os.fdopen(fd, "w") as f:
+        f.write(key.hex() + "\n")
+    return path

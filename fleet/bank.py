@@ -1,0 +1,331 @@
+"""The scenario bank: every scene, many seeds, our pipeline and the baselines a user would pick.
+
+    trustfg experiment bank [--scenes NAME|FILE ...] [--seed S] [--seeds K] [--methods M ...]
+                            [--fresh K] [--set SECTION.KEY=VALUE ...] [--jobs J] [--out DIR]
+
+Per scene and method, every seed is one in-process run (fleet.fleet_sim, or
+fleet.baselines for ORCA) with the same start delays and cruise speeds for every method
+(fleet_sim.draw_departures from the seed). Methods:
+
+* ``full``: the whole pipeline as shipped (every trust factor, and whatever the car
+  pipeline switches on by default);
+* ``fixed``: no trust factors (no consistency factor, no transparency scaling): the
+  proximity hinge at eps_0 from every peer; the rest of the pipeline as in ``full``;
+* ``wide``: the same with 2 eps_0 from every peer (trust.epsilon_gain_fixed = 2);
+* ``orca``: ORCA (pyrvo) driving the same cars with perfect state and no messages.
+
+A run's outcome, judged on the executed motion (fleet.runs.motion_summary): ``breach``
+(two cars closer than the required clearance), else ``contact`` (a car's edge touched an
+obstacle or wall), else ``deadlock`` (a car not at its goal at the timeout, and none of the
+cars still out moved more than DEADLOCK_MOVE_M in the last DEADLOCK_WINDOW_S), else
+``timeout`` (still moving), else ``success`` (every car at its goal). Rates, medians and
+their 95 % bootstrap confidence intervals are in fleet.bank_report.
+
+``--fresh K`` adds K random-field scenes made from generator seeds drawn from the
+operating system's entropy at the start of the run (printed and saved in OUT/fresh/, so
+the row can be re-run): scenes nobody tuned on, reported apart from the bank.
+``--set`` changes a config value of every scene for every method, e.g. to switch a part
+of the pipeline off for an ablation (``--set planner.interp_checks=8``).
+"""
+
+from __future__ import annotations
+
+import copy
+import hashlib
+import json
+import os
+import platform
+import secrets
+import sys
+import time
+import tomllib
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..agent.config import ConfigError, Scenario
+from ..agent.scenario_files import read_source, scenario_from_dict
+from .command import command_parser, configured
+from .experiments import NO_TRUST, Progress, _sdf
+from .fleet_sim import simulate
+from .runs import RunRecord, motion_summary
+
+BANK = ("circle-4", "circle-8", "circle-16", "circle-obstacles-4", "circle-obstacles-8", "corridor-4",
+        "bottleneck-4", "t-junction-6", "warehouse-8", "random-field-6-a", "random-field-6-b")
+"""The shipped scenes of the bank (deploy/scenarios; each file says how it was generated)."""
+FRESH_KIND = "random-field"
+DEADLOCK_WINDOW_S = 5.0
+DEADLOCK_MOVE_M = 0.05
+
+
+@dataclass(frozen=True)
+class Method:
+    label: str
+    description: str
+    overrides: dict = field(default_factory=dict)
+    """Config changes, as a scenario file's tables: {section: {key: value}}."""
+    orca: bool = False
+
+
+METHODS = {
+    "full": Method("full pipeline", "every trust factor on, the pipeline as shipped"),
+    "fixed": Method("no trust, eps_0", "no trust factors; eps_0 from every peer", {"planner": NO_TRUST}),
+    "wide": Method("no trust, 2 eps_0", "no trust factors; 2 eps_0 from every peer",
+                   {"planner": NO_TRUST, "trust": {"epsilon_gain_fixed": 2.0}}),
+    "orca": Method("ORCA", "ORCA (pyrvo), perfect state, no messages", orca=True),
+}
+
+
+# --- scenes and their variants -----------------------------------------------------------------
+
+
+def scene_data(source: str | Path) -> tuple[dict, str]:
+    """A scene file's tables and its first comment line (what it is, how it was made)."""
+    text, label = read_source(source)
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{label}: not valid TOML: {exc}") from None
+    first = text.splitlines()[0] if text else ""
+    return data, first.lstrip("# ").strip() if first.startswith("#") else ""
+
+
+def variant(data: dict, *changes: dict) -> Scenario:
+    """The scene with every table of ``changes`` merged in, validated."""
+    merged = copy.deepcopy(data)
+    for change in changes:
+        for section, values in change.items():
+            merged.setdefault(section, {}).update(values)
+    return scenario_from_dict(merged)
+
+
+def parse_settings(settings: list[str]) -> dict:
+    """``SECTION.KEY=VALUE`` (VALUE in TOML: 0.5, true, "text", [1, 2]) -> {section: {key: value}}."""
+    out: dict = {}
+    for setting in settings:
+        name, sep, value = setting.partition("=")
+        section, dot, key = name.strip().partition(".")
+        if not (sep and dot and section and key):
+            raise ConfigError(f"--set {setting!r}: expected SECTION.KEY=VALUE")
+        try:
+            parsed = tomllib.loads(f"v = {value.strip()}")["v"]
+        except tomllib.TOMLDecodeError:
+            raise ConfigError(f"--set {setting!r}: {value!r} is not a TOML value") from None
+        out.setdefault(section, {})[key] = parsed
+    return out
+
+
+# --- one run ---------------------------------------------------------------------------------
+
+
+def run_case(scene: str, scenario: Scenario, method: str, seed: int) -> dict:
+    """Simulate one seed of one scene with one method and judge it."""
+    started, cpu = time.perf_counter(), time.process_time()
+    sdf = _sdf(scenario.world)
+    if METHODS[method].orca:
+        from .baselines import simulate_orca
+        record = simulate_orca(scenario, seed, sdf)
+    else:
+        record = simulate(scenario, seed, sdf=sdf, record_trust=False)
+    return judge(scene, method, scenario, record, sdf) | {"wall_s": round(time.perf_counter() - started, 2),
+                                                          "cpu_s": round(time.process_time() - cpu, 2)}
+
+
+def judge(scene: str, method: str, scenario: Scenario, record: RunRecord, sdf) -> dict:
+    motion = motion_summary(scenario, record, sdf)
+    n = len(record.car_ids)
+    clearance = np.array(motion["min_clearance"], dtype=float)
+    np.fill_diagonal(clearance, np.inf)
+    arrived = record.arrived_at
+    if motion["breaches"]:
+        outcome = "breach"
+    elif motion["obstacle_min_clearance"] < 0.0:
+        outcome = "contact"
+    elif all(a is not None for a in arrived):
+        outcome = "success"
+    else:
+        outcome = "deadlock" if stuck(record) else "timeout"
+    replans = np.concatenate([np.asarray(r, dtype=float) for r in record.replan_ms]) if record.replan_ms else np.zeros(0)
+    counters: dict[str, int] = {}
+    for car in record.counters:
+        for key, value in car.items():
+            counters[key] = counters.get(key, 0) + int(value)
+    return {
+        "scene": scene, "method": method, "seed": record.seed, "cars": n, "outcome": outcome,
+        "least_clearance_m": round(float(clearance.min()), 4),
+        "obstacle_min_clearance_m": motion["obstacle_min_clearance"],
+        "breaches": motion["breaches"],
+        "arrived": sum(a is not None for a in arrived),
+        "makespan_s": motion["makespan_s"],
+        "flowtime_s": round(sum(arrived), 3) if all(a is not None for a in arrived) else None,
+        "replan_ms_median": round(float(np.median(replans)), 3) if replans.size else None,
+        "replan_ms_p95": round(float(np.percentile(replans, 95)), 3) if replans.size else None,
+        "counters": counters,
+    }
+
+
+def stuck(record: RunRecord) -> bool:
+    """No car still out moved more than DEADLOCK_MOVE_M in the run's last DEADLOCK_WINDOW_S."""
+    out = [i for i, a in enumerate(record.arrived_at) if a is None]
+    window = record.times >= record.times[-1] - DEADLOCK_WINDOW_S
+    positions = record.states[window][:, out, :2]
+    spread = np.linalg.norm(positions - positions[-1:], axis=-1).max(axis=0)
+    return bool(np.all(spread <= DEADLOCK_MOVE_M))
+
+
+def _case(args: tuple[str, Scenario, str, int]) -> dict:
+    return run_case(*args)
+
+
+# --- the whole bank ----------------------------------------------------------------------------
+
+
+def run_bank(scenes: dict[str, tuple[dict, str]], methods: list[str], seeds: dict[str, list[int]], jobs: int,
+             settings: dict, groups: dict[str, str], journal: Path) -> list[dict]:
+    """Every (scene, method, seed); ``groups`` says which row (bank or fresh) a scene joins.
+
+    Each finished run is appended to ``journal`` (JSON lines) at once; a run already there
+    for the same scene config, method and seed is not run again, so a long bank that was
+    stopped carries on where it stopped when started again with the same --out."""
+    done = {}
+    if journal.exists():
+        for line in journal.read_text().splitlines():
+            run = json.loads(line)
+            done[(run["fingerprint"], run["method"], run["seed"])] = run
+    tasks, runs = [], []
+    for scene, (data, _) in scenes.items():
+        for method in methods:
+            scenario = variant(data, METHODS[method].overrides, settings)
+            mark = fingerprint(scenario)
+            for seed in seeds[scene]:
+                if (mark, method, seed) in done:
+                    runs.append(done[(mark, method, seed)] | {"scene": scene, "group": groups[scene]})
+                else:
+                    tasks.append((scene, scenario, method, seed))
+    if runs:
+        print(f"{len(runs)} runs already in {journal}, {len(tasks)} to go", file=sys.stderr)
+    tasks.sort(key=lambda task: -len(task[1].cars))  # the big scenes first: the pool ends together
+    progress = Progress("bank", max(1, len(tasks)))
+    with ProcessPoolExecutor(max_workers=max(1, jobs)) as pool, journal.open("a") as log:
+        futures = {pool.submit(_case, task): task for task in tasks}
+        for future in as_completed(futures):
+            run = future.result()
+            run["group"] = groups[run["scene"]]
+            run["fingerprint"] = fingerprint(futures[future][1])
+            log.write(json.dumps(run) + "\n")
+            log.flush()
+            runs.append(run)
+            progress.step(f"{run['scene']} {run['method']} seed {run['seed']}: {run['outcome']}, "
+                          f"least clearance {run['least_clearance_m']:.3f} m, {run['wall_s']:.1f} s")
+    progress.done()
+    runs.sort(key=lambda r: (r["group"] != "bank", list(scenes).index(r["scene"]), list(METHODS).index(r["method"]),
+                             r["seed"]))
+    return runs
+
+
+def fingerprint(scenario: Scenario) -> str:
+    """A digest of everything a run depends on besides its method and seed."""
+    return hashlib.sha256(repr(scenario).encode()).hexdigest()[:16]
+
+
+def machine() -> dict:
+    model = ""
+    try:
+        model = next(line.split(":", 1)[1].strip() for line in Path("/proc/cpuinfo").read_text().splitlines()
+                     if line.startswith("model name"))
+    except (OSError, StopIteration):
+        pass
+    return {"cpus": os.cpu_count(), "cpu": model, "platform": platform.platform(), "python": platform.python_version()}
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = command_parser("trustfg experiment bank", __doc__)
+    parser.add_argument("--scenes", nargs="+", default=list(BANK), metavar="SCENE",
+                        help="scene names or files (default: the bank, " + " ".join(BANK) + ")")
+    parser.add_argument("--seed", type=int, default=0, help="first seed (default 0)")
+    parser.add_argument("--seeds", type=int, default=100, help="seeds per scene (default 100)")
+    parser.add_argument("--methods", nargs="+", default=list(METHODS), choices=list(METHODS),
+                        help="what drives the cars (default: all of " + ", ".join(METHODS) + ")")
+    parser.add_argument("--fresh", type=int, default=0,
+                        help="add this many random-field scenes from generator seeds drawn now (default 0)")
+    parser.add_argument("--fresh-cars", type=int, default=6, help="cars in each fresh scene (default 6)")
+    parser.add_argument("--fresh-seeds", type=int, default=5, help="seeds per fresh scene (default 5)")
+    parser.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                        help="change a config value of every scene and method (repeatable; TOML values)")
+    parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
+                        help="parallel runs (default: one per core)")
+    parser.add_argument("--out", type=Path, default=None,
+                        help="output folder (default runs/bank-<time>); an existing one carries on where it stopped")
+    parser.add_argument("--no-figures", action="store_true", help="skip the PNG figure")
+    args = parser.parse_args(argv)
+    if args.seeds < 1 or args.fresh < 0 or args.fresh_seeds < 1:
+        parser.error("--seeds and --fresh-seeds must be at least 1, --fresh at least 0")
+    if "orca" in args.methods:
+        from .baselines import MissingLibrary, _pyrvo
+        try:
+            _pyrvo()
+        except MissingLibrary as exc:
+            print(f"trustfg experiment bank: {exc}", file=sys.stderr)
+            return 2
+    out = args.out or Path("runs") / time.strftime("bank-%Y%m%d-%H%M%S")
+    settings = configured("trustfg experiment bank", lambda: parse_settings(args.set))
+    scenes = {}
+    for source in args.scenes:
+        data, note = configured("trustfg experiment bank", lambda: scene_data(source))
+        scenes[str(data.get("name") or Path(source).stem)] = (data, note)
+    for method in args.methods:  # a bad --set fails here, once, not in every worker
+        for data, _ in scenes.values():
+            configured("trustfg experiment bank", lambda: variant(data, METHODS[method].overrides, settings))
+    groups = {name: "bank" for name in scenes}
+    seeds = {name: list(range(args.seed, args.seed + args.seeds)) for name in scenes}
+    fresh = out / "fresh"
+    fresh_seeds: list[int] = []
+    if args.fresh and fresh.is_dir() and any(fresh.glob("*.toml")):
+        print(f"reusing the fresh scenes in {fresh}", file=sys.stderr)  # a stopped bank carries on
+        paths = sorted(fresh.glob("*.toml"))
+    elif args.fresh:
+        from .scenes import generate, scene_file_text
+        fresh_seeds = [secrets.randbelow(2**31) for _ in range(args.fresh)]
+        print(f"fresh {FRESH_KIND} scenes ({args.fresh_cars} cars) from generator seeds {fresh_seeds}", file=sys.stderr)
+        fresh.mkdir(parents=True, exist_ok=True)
+        paths = []
+        for seed in fresh_seeds:
+            name = f"{FRESH_KIND}-{args.fresh_cars}-s{seed}"
+            scenario, text = configured("trustfg experiment bank",
+                                        lambda: generate(FRESH_KIND, args.fresh_cars, seed, name))
+            paths.append(fresh / f"{name}.toml")
+            paths[-1].write_text(scene_file_text(scenario, FRESH_KIND, args.fresh_cars, seed, text))
+    for path in paths if args.fresh else []:
+        data, note = scene_data(path)
+        scenes[data["name"]] = (data, note)
+        groups[data["name"]] = "fresh"
+        seeds[data["name"]] = list(range(args.seed, args.seed + args.fresh_seeds))
+    started = time.perf_counter()
+    out.mkdir(parents=True, exist_ok=True)
+    runs = run_bank(scenes, args.methods, seeds, args.jobs, settings, groups, out / "runs.jsonl")
+    from . import bank_report
+    report = {
+        "experiment": "bank",
+        "command": "trustfg experiment bank " + " ".join(argv if argv is not None else sys.argv[1:]),
+        "machine": machine(),
+        "wall_time_s": round(time.perf_counter() - started, 1),
+        "cpu_time_s": round(sum(r.get("cpu_s", 0.0) for r in runs), 1),
+        "methods": {m: {"label": METHODS[m].label, "description": METHODS[m].description} for m in args.methods},
+        "scenes": {name: {"group": groups[name], "about": note, "seeds": seeds[name]}
+                   for name, (_, note) in scenes.items()},
+        "fresh_generator_seeds": [int(n.rsplit("-s", 1)[1]) for n, g in groups.items() if g == "fresh"],
+        "settings": settings,
+        "summary": bank_report.summarise(runs),
+        "runs": runs,
+    }
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "bank.json").write_text(json.dumps(report, indent=1))
+    table = bank_report.markdown(report)
+    (out / "bank.md").write_text(table)
+    if not args.no_figures:
+        bank_report.figure(report, out / "bank.png")
+    print(table)
+    print(f"wrote {out.resolve()}")
+    return 0

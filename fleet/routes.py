@@ -1,0 +1,130 @@
+"""Routes for generated scenes: a car's via points around the obstacles of a map.
+
+A scene's route is its lane: the planner seeds its first plan along it and is pulled
+softly towards it (planner.lane_keeping), and the ORCA baseline steers at its next via
+point. Cars whose straight line from start to goal keeps ``comfort`` from every obstacle
+get no via points. Otherwise the route is the cheapest path on an 8-connected grid over
+the free space (the cells whose signed distance is at least ``clearance``), where a step
+costs its length times
+
+    1 + NEAR_WEIGHT * clip((comfort - d) / comfort, 0, 1),      d the step's distance to obstacles
+
+(so routes keep to the middle of a passage where they can), found by scipy's Dijkstra,
+then shortened: from each kept point, the farthest later grid point whose straight segment
+keeps ``comfort`` (or what its two ends have, if less) is the next via point.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import dijkstra
+
+from ..agent.config import CarConfig, Scenario
+from ..agent.world import SignedDistanceField
+
+GRID_M = 0.05
+"""Cell size of the route search, m."""
+NEAR_WEIGHT = 3.0
+SEGMENT_STEP_M = 0.02
+"""Spacing of the distance checks along a straight segment, m."""
+COMFORT_MARGIN_M = 0.15
+"""A scene's routes keep eps_obs + this from obstacles where they can."""
+
+
+class NoRoute(ValueError):
+    """No path keeps the required clearance between a start and its goal."""
+
+
+def segment_clear(sdf: SignedDistanceField, a: np.ndarray, b: np.ndarray, threshold: float) -> bool:
+    """Whether every point of the segment a-b is at least ``threshold`` from any obstacle."""
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    count = max(2, int(np.ceil(np.linalg.norm(b - a) / SEGMENT_STEP_M)) + 1)
+    points = a + np.linspace(0.0, 1.0, count)[:, None] * (b - a)
+    return bool(np.all(sdf.distance(points) >= threshold))
+
+
+def path_length(points: np.ndarray) -> float:
+    return float(np.sum(np.linalg.norm(np.diff(np.asarray(points, dtype=float), axis=0), axis=1)))
+
+
+def car_route(scenario: Scenario, car: CarConfig, sdf: SignedDistanceField) -> tuple[tuple[float, float], ...]:
+    """The car's own via points, or, if it has none, a route that keeps eps_obs (and
+    COMFORT_MARGIN_M more where it can) from obstacles: NoRoute if there is none."""
+    if car.route:
+        return car.route
+    eps_obs = scenario.safety.epsilon_obstacle(car.radius_m)
+    return plan_route(sdf, scenario.world.bounds_m, car.start, car.goal, eps_obs, eps_obs + COMFORT_MARGIN_M)
+
+
+def plan_route(sdf: SignedDistanceField, bounds: tuple[float, float, float, float], start, goal,
+               clearance: float, comfort: float) -> tuple[tuple[float, float], ...]:
+    """Via points (start and goal excluded) from ``start`` to ``goal``; NoRoute if none
+    keeps ``clearance``."""
+    start, goal = np.asarray(start, dtype=float), np.asarray(goal, dtype=float)
+    ends = float(min(sdf.distance(start[None])[0], sdf.distance(goal[None])[0]))
+    if segment_clear(sdf, start, goal, min(comfort, ends)):
+        return ()
+    grid = _Grid(sdf, bounds, clearance, comfort)
+    cells = grid.path(start, goal)
+    points = np.vstack([start, grid.centres[cells], goal])
+    return tuple((round(float(x), 3), round(float(y), 3)) for x, y in _shortcut(sdf, points, comfort)[1:-1])
+
+
+def _shortcut(sdf: SignedDistanceField, points: np.ndarray, comfort: float) -> np.ndarray:
+    distance = sdf.distance(points)
+    kept = [0]
+    i = 0
+    while i < len(points) - 1:
+        j = len(points) - 1
+        while j > i + 1 and not segment_clear(sdf, points[i], points[j], min(comfort, distance[i], distance[j])):
+            j -= 1
+        kept.append(j)
+        i = j
+    return points[kept]
+
+
+class _Grid:
+    """The free cells of a map and the edges between neighbouring free cells."""
+
+    def __init__(self, sdf: SignedDistanceField, bounds, clearance: float, comfort: float):
+        x0, y0, x1, y1 = bounds
+        xs = np.arange(x0 + GRID_M / 2, x1, GRID_M)
+        ys = np.arange(y0 + GRID_M / 2, y1, GRID_M)
+        gx, gy = np.meshgrid(xs, ys)
+        self.shape = gx.shape
+        centres = np.stack([gx.ravel(), gy.ravel()], axis=1)
+        distance = sdf.distance(centres)
+        self.free = distance >= clearance
+        self.centres = centres
+        index = np.arange(centres.shape[0]).reshape(self.shape)
+        rows, cols, weights = [], [], []
+        for dy, dx in ((0, 1), (1, 0), (1, 1), (1, -1)):
+            h, w = self.shape
+            a = index[:h - dy, max(0, -dx):w - max(0, dx)].ravel()
+            b = index[dy:, max(0, dx):w - max(0, -dx)].ravel()
+            ok = self.free[a] & self.free[b]
+            a, b = a[ok], b[ok]
+            near = np.clip((comfort - np.minimum(distance[a], distance[b])) / comfort, 0.0, 1.0)
+            rows.append(a)
+            cols.append(b)
+            weights.append(GRID_M * np.hypot(dx, dy) * (1.0 + NEAR_WEIGHT * near))
+        n = centres.shape[0]
+        self.graph = coo_matrix((np.concatenate(weights), (np.concatenate(rows), np.concatenate(cols))),
+                                shape=(n, n)).tocsr()
+
+    def nearest_free(self, point: np.ndarray) -> int:
+        candidates = np.nonzero(self.free)[0]
+        if candidates.size == 0:
+            raise NoRoute("the map has no free space")
+        return int(candidates[np.argmin(np.linalg.norm(self.centres[candidates] - point, axis=1))])
+
+    def path(self, start: np.ndarray, goal: np.ndarray) -> list[int]:
+        source, target = self.nearest_free(start), self.nearest_free(goal)
+        distance, previous = dijkstra(self.graph, directed=False, indices=source, return_predecessors=True)
+        if not np.isfinite(distance[target]):
+            raise NoRoute(f"no path from {tuple(start)} to {tuple(goal)} keeps the clearance")
+        cells = [target]
+        while cells[-1] != source:
+            cells.append(int(previous[cells[-1]]))
+        return cells[::-1]

@@ -1,0 +1,48 @@
+"""CPU accounting from /proc: the stat parser and the meter on a real process."""
+
+import os
+import time
+
+import pytest
+
+from trustfg.fleet.cpu import CLOCK_TICKS_PER_S, CpuMeter, Read, parse_stat_ticks, read_ticks, share
+
+# A real /proc/PID/stat line shape (proc(5)), with a command name holding ') (' and spaces.
+STAT = ("4242 (trustfg car) (1)) S 1 4242 4242 0 -1 4194560 2810 0 0 0 "
+        "1234 567 8 9 20 0 7 0 123456 1490000000 36000 18446744073709551615 1 1 0 0 0 0 0 "
+        "16781312 16386 0 0 0 17 1 0 0 0 0 0")
+
+
+def test_stat_ticks_are_utime_plus_stime_counted_from_the_last_parenthesis():
+    assert parse_stat_ticks(STAT) == 1234 + 567
+
+
+@pytest.mark.parametrize("text", ["", "4242 trustfg S 1", "4242 (x) S 1 2 3"])
+def test_a_line_that_is_not_stat_is_refused(text):
+    with pytest.raises(ValueError):
+        parse_stat_ticks(text)
+
+
+def test_share_of_a_core_between_two_reads():
+    assert share(Read(10.0, 0), Read(12.0, CLOCK_TICKS_PER_S)) == pytest.approx(0.5)
+    assert share(Read(10.0, 0), Read(10.0, 5)) is None
+
+
+def test_a_process_that_is_gone_reads_none():
+    assert read_ticks(2**22 + 12345) is None
+
+
+def test_the_meter_sees_cpu_burnt_and_not_time_slept():
+    meter = CpuMeter()
+    meter.watch("me", os.getpid())
+    time.sleep(0.3)
+    meter.sample(mark="slept")
+    burn_until = time.process_time() + 0.3
+    while time.process_time() < burn_until:
+        pass
+    meter.sample(mark="burnt")
+    meter.pids["gone"] = 2**22 + 12345  # never readable: reported as null, not a crash
+    summary = meter.summary("slept", "burnt")
+    assert 0.25 <= summary["me"]["cpu_s"] <= 0.45, summary
+    assert summary["me"]["share"] < summary["me"]["share_slept_burnt"], summary
+    assert summary["gone"] is None

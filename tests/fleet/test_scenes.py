@@ -1,0 +1,86 @@
+"""Generated scenes: every kind, the shipped bank regenerates from its header, bad scenes are refused."""
+
+import dataclasses
+import re
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from trustfg.agent.config import ConfigError
+from trustfg.agent.scenario_files import load_scenario, read_source
+from trustfg.agent.world import build_sdf
+from trustfg.fleet.bank import BANK
+from trustfg.fleet.routes import segment_clear
+from trustfg.fleet.scenes import KINDS, check_scene, generate, scene_file_text
+
+SIZES = {"circle": 8, "circle-obstacles": 8, "corridor": 4, "bottleneck": 4, "t-junction": 6, "warehouse": 8,
+         "random-field": 6}
+
+
+@pytest.mark.parametrize("kind", list(KINDS))
+def test_every_kind_makes_checked_scenes_whose_routes_keep_clear_of_obstacles(kind):
+    for seed in (11, 12):
+        scenario, _ = generate(kind, SIZES[kind], seed)
+        sdf = build_sdf(scenario.world)
+        check_scene(scenario, sdf)
+        assert len(scenario.cars) == SIZES[kind]
+        for car in scenario.cars:
+            eps_obs = scenario.safety.epsilon_obstacle(car.radius_m)
+            points = np.array([car.start, *car.route, car.goal])
+            assert all(segment_clear(sdf, a, b, eps_obs) for a, b in zip(points[:-1], points[1:]))
+        again, _ = generate(kind, SIZES[kind], seed)
+        assert again == scenario  # a seed makes one scene
+
+
+@pytest.mark.parametrize("kind", ["circle-obstacles", "corridor", "t-junction", "warehouse", "random-field"])
+def test_different_seeds_make_different_scenes(kind):
+    assert generate(kind, SIZES[kind], 1)[0] != generate(kind, SIZES[kind], 2)[0]
+
+
+@pytest.mark.parametrize("name", BANK)
+def test_the_shipped_bank_regenerates_from_the_command_in_its_header(name):
+    text, _ = read_source(name)
+    match = re.search(r"--kind (\S+) --cars (\d+) --seed (\d+) --name (\S+)", text)
+    kind, cars, seed, scene = match.group(1), int(match.group(2)), int(match.group(3)), match.group(4)
+    scenario, about = generate(kind, cars, seed, scene)
+    assert scene == name
+    assert scene_file_text(scenario, kind, cars, seed, about) == text
+    assert load_scenario(name) == scenario
+
+
+def test_a_start_inside_an_obstacle_or_next_to_another_car_is_refused():
+    scenario, _ = generate("warehouse", 4, 3)
+    rack = scenario.world.obstacles[0]
+    inside = ((rack.min[0] + rack.max[0]) / 2, 0.0)
+    bad = dataclasses.replace(scenario, cars=(dataclasses.replace(scenario.cars[0], start=inside), *scenario.cars[1:]))
+    with pytest.raises(ConfigError, match="car 1's start"):
+        check_scene(bad)
+    near = (scenario.cars[1].start[0] + 0.3, scenario.cars[1].start[1])
+    bad = dataclasses.replace(scenario, cars=(scenario.cars[0], scenario.cars[1],
+                                              dataclasses.replace(scenario.cars[2], start=near), *scenario.cars[3:]))
+    with pytest.raises(ConfigError, match="starts of cars 2 and 3"):
+        check_scene(bad)
+
+
+def _trustfg(*args):
+    return subprocess.run([sys.executable, "-m", "trustfg", *args], capture_output=True, text=True, timeout=120)
+
+
+def test_the_command_writes_a_scene_and_refuses_bad_ones_in_one_line(tmp_path):
+    out = tmp_path / "t.toml"
+    done = _trustfg("scenario", "generate", "--kind", "t-junction", "--cars", "6", "--seed", "4", "--out", str(out))
+    assert done.returncode == 0, done.stderr
+    assert len(load_scenario(out).cars) == 6
+    assert _trustfg("scenario", "check", str(out)).returncode == 0
+
+    text = out.read_text()
+    first_start = re.search(r"start = \[[^\]]*\]", text).group(0)
+    out.write_text(text.replace(first_start, "start = [-3.0, -3.0]", 1))  # in the corner block
+    bad = _trustfg("scenario", "check", str(out))
+    assert bad.returncode == 2
+    assert bad.stderr.count("\n") == 1 and "Traceback" not in bad.stderr and "car 1's start" in bad.stderr
+
+    too_many = _trustfg("scenario", "generate", "--kind", "t-junction", "--cars", "20", "--out", str(out))
+    assert too_many.returncode == 2 and too_many.stderr.count("\n") == 1 and "at most 12" in too_many.stderr
