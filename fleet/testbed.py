@@ -30,6 +30,7 @@ from ..agent.config import Scenario
 from ..agent.scenario_files import dump_scenario
 from .bus import FleetBus
 from .launch import free_port, loopback_fleet, with_deadman
+from .link_keys import with_link_keys
 from .operator import OperatorSession
 from .processes import Processes, wait_ready
 
@@ -37,7 +38,7 @@ from .processes import Processes, wait_ready
 class LoopbackFleet:
     def __init__(self, scenario: Scenario, out: Path, *, deadman_s: float | None = None,
                  mocap_args: tuple[str, ...] = (), cars_first: tuple[int, ...] | None = None):
-        self.fleet = with_deadman(loopback_fleet(scenario, None, None, 0.0), deadman_s)
+        self.fleet = with_link_keys(with_deadman(loopback_fleet(scenario, None, None, 0.0), deadman_s), out / "keys")
         self.out = out
         self.config = out / "fleet.toml"
         self.command_log = out / "commands.csv"
