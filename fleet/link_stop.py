@@ -40,9 +40,6 @@ DIRECT_PERIOD_S = 0.02
 """The direct path repeats its E_STOP at the command rate of a car process (50 Hz)."""
 DIRECT_REPEAT_S = 0.5
 """... for this long after the stop (25 datagrams: losing a few does not matter)."""
-DIRECT_RELEASE_S = 0.1
-"""A release's RELEASE datagrams go for this long (5 datagrams): they are STOPs too, and
-the car process's own stream should take over soon."""
 
 
 def named(fleet: "Scenario", cars: Iterable[int] = ()) -> list[int]:
@@ -62,6 +59,7 @@ class LinkStopper:
         from ..agent.config import ConfigError
 
         self.clock = clock
+        self.release_s = fleet.operator.release_s
         self.senders: dict[int, CommandSender] = {}
         self.unreachable: dict[int, str] = {}
         """Cars without a direct path, and why (their key does not read on this machine, a
@@ -94,17 +92,19 @@ class LinkStopper:
         for car in cars:
             self._until.pop(car, None)
 
-    def release(self, cars: Iterable[int], now: float, repeat_s: float = DIRECT_RELEASE_S) -> None:
+    def release(self, cars: Iterable[int], now: float) -> None:
         """Release the e-stops the operator sent straight to the named cars: end the
         repeats, then RELEASE (with STOP) in a new session, now and at every :meth:`step`
-        for ``repeat_s``. Version-1 links get none (see the module docstring)."""
+        for ``[operator] release_s`` (0.8 s: longer than another session's e-stop repeats,
+        so none still in flight latches the car again). Version-1 links get none (see the
+        module docstring)."""
         cars = list(cars)
         self.cancel(cars)
         for car in cars:
             sender = self.senders.get(car)
             if sender is not None and sender.version == 2:
                 sender.renew_session()
-                self._release_until[car] = now + repeat_s
+                self._release_until[car] = now + self.release_s
                 sender.send(0.0, 0.0, Flags.STOP | Flags.RELEASE)
 
     def ping(self, cars: Iterable[int]) -> None:

@@ -135,7 +135,8 @@ class OperatorConfig:
     operator to start it again."""
     release_s: float = 0.8
     """How long a car process's datagrams carry RELEASE after the operator released it
-    (while it waits): longer than an operator's e-stop repeats on the link (0.5 s,
+    (while it waits), and the operator's tools send their own RELEASE straight to a
+    version-2 link (a car latches per sender), seconds: longer than an operator's e-stop repeats on the link (0.5 s,
     fleet.link_stop), so a repeat still in flight cannot latch the car again, and enough
     datagrams (40 at 50 Hz) that losing some does not matter."""
     clock_tolerance_s: float = 0.02
