@@ -32,7 +32,6 @@ of the pipeline off for an ablation (``--set planner.interp_checks=8``).
 
 from __future__ import annotations
 
-import argparse
 import copy
 import hashlib
 import json
@@ -50,7 +49,7 @@ import numpy as np
 
 from ..agent.config import ConfigError, Scenario
 from ..agent.scenario_files import read_source, scenario_from_dict
-from .command import configured
+from .command import command_parser, configured
 from .experiments import NO_TRUST, Progress, _sdf
 from .fleet_sim import simulate
 from .runs import RunRecord, motion_summary
@@ -244,7 +243,7 @@ def machine() -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="trustfg experiment bank", description=__doc__.split("\n")[0])
+    parser = command_parser("trustfg experiment bank", __doc__)
     parser.add_argument("--scenes", nargs="+", default=list(BANK), metavar="SCENE",
                         help="scene names or files (default: the bank, " + " ".join(BANK) + ")")
     parser.add_argument("--seed", type=int, default=0, help="first seed (default 0)")

@@ -16,7 +16,6 @@ misinformation) with and without the transparency factor.
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import functools
 import json
@@ -35,7 +34,7 @@ from ..agent import metrics
 from ..agent.config import Scenario
 from ..agent.scenario_files import load_scenario
 from ..agent.world import build_sdf
-from .command import configured
+from .command import command_parser, configured
 from .fleet_sim import simulate
 from .runs import RunRecord, motion_summary, plan_outcomes, rounded
 
@@ -347,8 +346,8 @@ def main(argv: list[str] | None = None) -> int:
     if argv and argv[0] in OTHER_EXPERIMENTS:
         import importlib
         return importlib.import_module(OTHER_EXPERIMENTS[argv[0]]).main(argv[1:])
-    parser = argparse.ArgumentParser(prog="trustfg experiment", description=__doc__.split("\n")[0],
-                                     epilog=f"also: {', '.join(OTHER_EXPERIMENTS)} (see 'trustfg experiment bank --help')")
+    parser = command_parser("trustfg experiment", __doc__,
+                            epilog=f"also: {', '.join(OTHER_EXPERIMENTS)} (see 'trustfg experiment bank --help')")
     parser.add_argument("name", choices=[*EXPERIMENTS, "all"])
     parser.add_argument("--seed", type=int, default=0, help="first seed (default 0)")
     parser.add_argument("--seeds", type=int, default=20, help="number of seeds (default 20)")

@@ -16,13 +16,21 @@ from dataclasses import dataclass, field
 
 from .checks import ConfigError, parse_udp_address, positive, with_overrides
 from .planning import DeadlockConfig, PlannerConfig, TrustConfig, VerifyConfig
-from .running import BusConfig, ControlConfig, GuardConfig, NatNetConfig, TrackingConfig, VehicleConfig
+from .running import (
+    BusConfig,
+    ControlConfig,
+    GuardConfig,
+    NatNetConfig,
+    OperatorConfig,
+    TrackingConfig,
+    VehicleConfig,
+)
 from .scene import CarConfig, Obstacle, SafetyConfig, SimConfig, WorldConfig
 
 __all__ = [
     "ConfigError", "parse_udp_address", "positive", "with_overrides", "PlannerConfig", "TrustConfig",
     "VerifyConfig", "DeadlockConfig",
-    "BusConfig", "ControlConfig", "GuardConfig", "NatNetConfig", "TrackingConfig", "VehicleConfig",
+    "BusConfig", "ControlConfig", "GuardConfig", "NatNetConfig", "OperatorConfig", "TrackingConfig", "VehicleConfig",
     "CarConfig", "Obstacle", "SafetyConfig", "SimConfig", "WorldConfig", "Scenario", "PALETTE",
 ]
 
@@ -47,6 +55,7 @@ class Scenario:
     control: ControlConfig = field(default_factory=ControlConfig)
     bus: BusConfig = field(default_factory=BusConfig)
     natnet: NatNetConfig = field(default_factory=NatNetConfig)
+    operator: OperatorConfig = field(default_factory=OperatorConfig)
 
     def validate(self, path: str = "") -> None:
         prefix = f"{path}." if path else ""
@@ -60,8 +69,12 @@ class Scenario:
         bodies = [car.body_id for car in self.cars]
         if len(set(bodies)) != len(bodies):
             raise ConfigError(f"{prefix}cars: rigid-body ids must be unique, got {bodies}")
-        for name in ("world", "safety", "planner", "trust", "verify", "deadlock", "vehicle", "tracking", "guard", "sim", "control", "bus", "natnet"):
+        for name in ("world", "safety", "planner", "trust", "verify", "deadlock", "vehicle", "tracking", "guard", "sim",
+                     "control", "bus", "natnet", "operator"):
             getattr(self, name).validate(prefix + name)
+        if self.operator.deadman_s and self.control.start_timeout_s:
+            raise ConfigError(f"{prefix}control.start_timeout_s: a car cannot drive without a start while "
+                              f"operator.deadman_s asks it to hear the operator (set one of them to 0)")
 
     def car(self, car_id: int) -> CarConfig:
         for car in self.cars:
