@@ -44,18 +44,22 @@ from __future__ import annotations
 import dataclasses
 import logging
 from collections import Counter, deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from .attacks import Liar
 from .config import CarConfig, Scenario
+from .deadlock import DeadlockWatch, peers_seen
 from .evidence import PeerView, audit, belief, safety_verdict, take_plan
 from .gp import Plan, standing
 from .messages import PlanMessage, TrustReport
-from .planner import PeerConstraint, PlanningError, PlanRequest, PlanResult, plan_trajectory
+from .planner import PeerConstraint, PlanningError, PlanRequest, PlanResult
+from .safe_plan import FALLBACK, Outcome, plan_safely
 from .track import Track
 from .trust import CONSISTENCY, SAFETY, TrustBook, graded
+from .verify import Bounds
 from .world import SignedDistanceField
 
 log = logging.getLogger(__name__)
@@ -71,6 +75,8 @@ before the window began. An older announcement has been superseded by plans we n
 received (loss, delay); holding a car to it would read silence as erratic driving."""
 ANNOUNCED_MIN_S = 0.2
 """A change of plan excuses what a car did only over at least this long after it."""
+WARM_GOAL_M = 0.25
+"""A plan that ends further than this from the goal does not warm-start a replan."""
 START_FROM_PLAN_M = 0.05
 START_FROM_PLAN_MPS = 0.15
 """A replan starts from the previous plan while the car is this close to it."""
@@ -86,6 +92,9 @@ class CarAgent:
     cruise_speed_mps: float | None = None
     rng: np.random.Generator = field(default_factory=lambda: np.random.default_rng(0))
     """Drives this car's attack only (seeded by the caller)."""
+    clock: Callable[[], float] | None = None
+    """Wall clock of the replan budget (VerifyConfig.budget_ms) in the car process; None
+    in the in-process fleet, whose replans take no simulated time (attempts only)."""
 
     def __post_init__(self) -> None:
         self.tracks: dict[int, Track] = {}
@@ -93,6 +102,10 @@ class CarAgent:
         self.trust = TrustBook(owner=self.car.id, config=self.scenario.trust)
         self.plan: Plan | None = None
         self.last_result: PlanResult | None = None
+        self.verified: Plan | None = None
+        """The last plan that passed verification: a fallback brakes along it."""
+        self.last_outcome: Outcome | None = None
+        self.deadlock = DeadlockWatch(self.car.id, self.scenario.deadlock)
         self.replan_ms: deque = deque(maxlen=100_000)  # bounded: a lab run may last hours
         self.counters: Counter = Counter()
         self.at_goal = False
@@ -256,20 +269,58 @@ class CarAgent:
             peers=tuple(c for _, c in constraints), warm_start=self.plan, route=self.car.route,
             lane=(self.car.start, *self.car.route),
         )
+        detour = self._give_way(now, motion.position)
+        if detour is not None:  # giving way in a deadlock (agent.deadlock): to the detour instead
+            request = dataclasses.replace(request, goal=detour, route=(), lane=(), t_arrive=t0 + ARRIVAL_SLACK_S
+                                          + float(np.linalg.norm(detour - motion.position)) / self.cruise)
         if self.liar is not None and now >= self.depart_at:  # a framer drives where it means harm
             request, constraints = self.liar.steer(request, constraints, now, self._seen(now))
             request = dataclasses.replace(request, peers=tuple(c for _, c in constraints))
+        # Warm-start from the previous plan, or, when that one went elsewhere (a fallback
+        # stops short, a detour), from the last verified plan if that one goes to the goal.
+        warm = next((plan for plan in (self.plan, self.verified) if plan is not None
+                     and np.linalg.norm(plan.positions[-1] - request.goal) <= WARM_GOAL_M), None)
+        request = dataclasses.replace(request, warm_start=warm)
         try:
-            result = plan_trajectory(request, self.scenario.planner, self.sdf)
+            outcome = plan_safely(request, self._bounds([peer for peer, _ in constraints]), self.scenario.planner,
+                                  self.scenario.verify, self.sdf, self.verified, self.clock)
         except PlanningError as exc:
             self.counters["replan_failed"] += 1
             log.warning("car %d: replanning failed, keeping the previous plan: %s", self.car.id, exc)
             return None
-        self.plan = result.plan
-        self.last_result = result
-        self.counters["peers_out_of_reach"] += result.peers_out_of_reach
-        self.replan_ms.append(result.time_ms)
-        return result
+        self._use(dataclasses.replace(outcome, blocked_by=tuple(constraints[i][0] for i in outcome.blocked_by)))
+        return outcome.result
+
+    def _give_way(self, now: float, position: np.ndarray) -> np.ndarray | None:
+        """The deadlock watch (agent.deadlock) on what we see: a detour goal while we give
+        way, else None. Counts ``deadlocks`` and ``deadlock_yields``."""
+        seen = peers_seen(self.tracks, self.peers, self.car.id, now, self.scenario.arrival_radius_m)
+        safety, r = self.scenario.safety, self.car.radius_m
+        blockers = frozenset(self.last_outcome.blocked_by) if self.last_outcome else frozenset()
+        detour = self.deadlock.goal(now, position, np.asarray(self.car.goal, float), seen, now >= self.depart_at,
+                                    safety.epsilon_0(r, r), self.sdf, safety.epsilon_obstacle(r), blockers)
+        for name, count in (("deadlocks", self.deadlock.deadlocks), ("deadlock_yields", self.deadlock.yields)):
+            if count:
+                self.counters[name] = count
+        return detour
+
+    def _bounds(self, peers: list[int]) -> Bounds:
+        """What our plans must keep from the walls and from each of ``peers`` (SafetyConfig)."""
+        safety, r = self.scenario.safety, self.car.radius_m
+        return Bounds.of(safety.epsilon_obstacle(r), safety.obstacle_breach(r),
+                         [safety.breach_distance(r, self.radius(p)) for p in peers], self.scenario.vehicle)
+
+    def _use(self, outcome: Outcome) -> None:
+        """Adopt a replan's outcome and count it (``plans_first``, ``plans_retry``,
+        ``plans_fallback``, ``plans_unverified``; ``peers_out_of_reach`` of the plan adopted)."""
+        self.counters[f"plans_{outcome.outcome}"] += 1
+        if outcome.outcome != FALLBACK:
+            self.verified = outcome.plan
+        self.plan = outcome.plan
+        self.last_outcome = outcome
+        self.last_result = outcome.result
+        self.counters["peers_out_of_reach"] += outcome.result.peers_out_of_reach
+        self.replan_ms.append(outcome.result.time_ms)
 
     def _start_state(self, motion, t0: float, now: float) -> tuple[np.ndarray, np.ndarray]:
         """Where the new plan starts: our previous plan's state at t0 while we track it
@@ -290,7 +341,8 @@ class CarAgent:
             points = np.array([position, *self.car.route, self.car.goal])
         else:
             times = np.linspace(t0, max(self.plan.t_end, t0), 30)
-            points = np.vstack([position, self.plan.position_at(times)])
+            # A plan that stops short of the goal (a fallback) leaves the rest of the way.
+            points = np.vstack([position, self.plan.position_at(times), self.car.goal])
         return float(np.sum(np.linalg.norm(np.diff(points, axis=0), axis=1)))
 
     # --- outputs ----------------------------------------------------------------------------

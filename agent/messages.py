@@ -3,10 +3,14 @@
 Every message is a msgpack map with these common keys:
 
     v     int    schema version (SCHEMA_VERSION)
-    k     str    kind: "plan" | "trust" | "pose" | "status" | "start"
+    k     str    kind: "plan" | "trust" | "pose" | "status" | "clock" | "start" | "stop"
+                 | "heartbeat"
     id    int    sender car id, 1..255 (must match N in the key trustfg/F/N/...);
-                 0 for the operator's "start" (key trustfg/F/start)
-    seq   int    sender's sequence number for this kind, 0..2^53
+                 0 for the operator's messages (start, stop, heartbeat: keys trustfg/F/KIND)
+    seq   int    sender's sequence number for this kind, 0..2^53; the operator's messages
+                 are numbered by their stamp in microseconds (operator_seq), so that the
+                 several operator processes that may run at once (go, stop, the dashboard)
+                 share one order
     t     float  stamp, seconds on the fleet clock
 
 and per kind:
@@ -20,9 +24,15 @@ and per kind:
             and keeps (for dashboards; receivers do not fuse them)
     pose    x, y, yaw floats, valid bool (own car, as its NatNet client sees it)
     status  state str (<= 32 chars), replan_ms float >= 0, iterations int >= 0,
-            at_goal bool, counters {str: int >= 0} (<= 64 entries)
-    start   cars {car_id: {depart: float, cruise: float > 0}}: when each car may set off
-            (fleet clock) and at what cruise speed (m/s); sent by the operator, id 0
+            at_goal bool, counters {str: int >= 0} (<= 64 entries), trial int >= 0 (the
+            trial the car last took, 0: none)
+    clock   nothing more: ``t`` is the car computer's clock when it answered the
+            operator's query on trustfg/F/N/clock (trustfg check measures offsets)
+    start   trial int >= 1, cars {car_id: {depart: float, cruise: float > 0}}: when each
+            car may set off (fleet clock) and at what cruise speed (m/s); operator, id 0
+    stop    action "estop" | "release" | "abort", cars [car_id, ...] (empty: every car),
+            trial int >= 0 (abort: the trial to end, 0 any); operator, id 0
+    heartbeat  nothing more: an operator's session is alive (the cars' deadman)
 
 Decoding checks types, lengths, finiteness and a size cap (MAX_MESSAGE_BYTES) and raises
 :class:`MessageError` for anything else -- never another exception. :class:`Inbox`
@@ -32,7 +42,6 @@ replayed are dropped; every drop is counted by reason.
 
 from __future__ import annotations
 
-import math
 from collections import Counter
 from dataclasses import dataclass, field
 from typing import Any, Union
@@ -41,17 +50,23 @@ import msgpack
 import numpy as np
 
 from .gp import Plan
+from .message_fields import MessageError
+from .message_fields import boolean as _bool
+from .message_fields import integer as _int
+from .message_fields import number as _float
+from .message_fields import numbers as _floats
+from .message_fields import only as _only
+from .message_fields import string as _str
 
 SCHEMA_VERSION = 1
+OPERATOR_KINDS = ("start", "stop", "heartbeat")
+"""Kinds only the operator sends (sender id 0, keys trustfg/F/KIND)."""
+STOP_ACTIONS = ("estop", "release", "abort")
 MAX_MESSAGE_BYTES = 64 * 1024
 MAX_PLAN_STATES = 256
 MAX_PEERS = 255
 MAX_SEQ = 2**53
 DIMENSIONS = ("safety", "consistency", "transparency")
-
-
-class MessageError(ValueError):
-    """A payload is not a valid trustfg message."""
 
 
 @dataclass(frozen=True)
@@ -107,23 +122,72 @@ class StatusMessage:
     iterations: int
     at_goal: bool
     counters: dict[str, int] = field(default_factory=dict)
+    trial: int = 0
 
     kind = "status"
 
 
 @dataclass(frozen=True)
+class ClockMessage:
+    """A car computer's clock, answering the operator's query (stamp = its clock)."""
+
+    sender: int
+    seq: int
+    stamp: float
+
+    kind = "clock"
+
+
+@dataclass(frozen=True)
 class StartMessage:
-    """The operator's go: departure time and cruise speed per car."""
+    """The operator's go for one trial: departure time and cruise speed per car."""
 
     seq: int
     stamp: float
+    trial: int
     departures: dict[int, tuple[float, float]] = field(default_factory=dict)
 
     kind = "start"
     sender = 0
 
 
-Message = Union[PlanMessage, TrustReport, PoseMessage, StatusMessage, StartMessage]
+@dataclass(frozen=True)
+class StopMessage:
+    """The operator's stop: ``estop`` (latched until released), ``release`` (of an
+    e-stop; the car then waits for a new start) or ``abort`` (the trial ends: cars hold
+    and wait), for ``cars`` (empty: every car)."""
+
+    seq: int
+    stamp: float
+    action: str
+    cars: tuple[int, ...] = ()
+    trial: int = 0
+
+    kind = "stop"
+    sender = 0
+
+    def names(self, car_id: int) -> bool:
+        return not self.cars or car_id in self.cars
+
+
+@dataclass(frozen=True)
+class HeartbeatMessage:
+    """An operator's session is alive (what the cars' deadman listens for)."""
+
+    seq: int
+    stamp: float
+
+    kind = "heartbeat"
+    sender = 0
+
+
+Message = Union[PlanMessage, TrustReport, PoseMessage, StatusMessage, ClockMessage, StartMessage, StopMessage,
+                HeartbeatMessage]
+
+
+def operator_seq(stamp: float) -> int:
+    """The sequence number of an operator's message sent at ``stamp``: microseconds."""
+    return int(stamp * 1e6)
 
 
 # --- encoding ---------------------------------------------------------------------------------
@@ -150,11 +214,15 @@ def encode(message: Message) -> bytes:
     elif isinstance(message, StatusMessage):
         body.update(state=message.state, replan_ms=float(message.replan_ms),
                     iterations=int(message.iterations), at_goal=bool(message.at_goal),
-                    counters={str(k): int(v) for k, v in message.counters.items()})
+                    counters={str(k): int(v) for k, v in message.counters.items()},
+                    trial=int(message.trial))
     elif isinstance(message, StartMessage):
+        body["trial"] = int(message.trial)
         body["cars"] = {int(car): {"depart": float(depart), "cruise": float(cruise)}
                         for car, (depart, cruise) in message.departures.items()}
-    else:
+    elif isinstance(message, StopMessage):
+        body.update(action=message.action, cars=[int(c) for c in message.cars], trial=int(message.trial))
+    elif not isinstance(message, (ClockMessage, HeartbeatMessage)):
         raise TypeError(f"not a trustfg message: {type(message).__name__}")
     return msgpack.packb(body, use_bin_type=True)
 
@@ -180,11 +248,30 @@ def decode(payload: bytes) -> Message:
     if version != SCHEMA_VERSION:
         raise MessageError(f"unsupported schema version {version} (this is {SCHEMA_VERSION})")
     kind = _str(body, "k", 16)
-    sender = _int(body, "id", 0 if kind == "start" else 1, 0 if kind == "start" else 255)
+    operator = kind in OPERATOR_KINDS
+    sender = _int(body, "id", 0 if operator else 1, 0 if operator else 255)
     seq = _int(body, "seq", 0, MAX_SEQ)
     stamp = _float(body, "t")
+    if kind == "heartbeat":
+        _only(body, set())
+        return HeartbeatMessage(seq, stamp)
+    if kind == "clock":
+        _only(body, set())
+        return ClockMessage(sender, seq, stamp)
+    if kind == "stop":
+        _only(body, {"action", "cars", "trial"})
+        action = _str(body, "action", 16)
+        if action not in STOP_ACTIONS:
+            raise MessageError(f"stop.action: expected one of {', '.join(STOP_ACTIONS)}, got {action!r}")
+        cars = body.get("cars")
+        if not isinstance(cars, list) or len(cars) > MAX_PEERS:
+            raise MessageError(f"stop.cars must be an array of at most {MAX_PEERS} car ids")
+        if any(isinstance(c, bool) or not isinstance(c, int) or not 1 <= c <= 255 for c in cars):
+            raise MessageError(f"stop.cars: bad car id in {cars!r}")
+        return StopMessage(seq, stamp, action, tuple(cars), _int(body, "trial", 0, MAX_SEQ))
     if kind == "start":
-        _only(body, {"cars"})
+        _only(body, {"cars", "trial"})
+        trial = _int(body, "trial", 1, MAX_SEQ)
         cars = body.get("cars")
         if not isinstance(cars, dict):
             raise MessageError("start.cars must be a map")
@@ -196,7 +283,7 @@ def decode(payload: bytes) -> Message:
                 raise MessageError(f"start.cars[{car}] must be a map")
             _only(entry, {"depart", "cruise"}, common=False)
             departures[car] = (_float(entry, "depart"), _float(entry, "cruise", 1e-3, 10.0))
-        return StartMessage(seq, stamp, departures)
+        return StartMessage(seq, stamp, trial, departures)
     if kind == "plan":
         _only(body, {"t0", "dt", "pos", "vel", "goal"})
         t0 = _float(body, "t0")
@@ -233,7 +320,7 @@ def decode(payload: bytes) -> Message:
         return PoseMessage(sender, seq, stamp, _float(body, "x"), _float(body, "y"),
                            _float(body, "yaw"), _bool(body, "valid"))
     if kind == "status":
-        _only(body, {"state", "replan_ms", "iterations", "at_goal", "counters"})
+        _only(body, {"state", "replan_ms", "iterations", "at_goal", "counters", "trial"})
         counters_raw = body.get("counters")
         if not isinstance(counters_raw, dict) or len(counters_raw) > 64:
             raise MessageError("status.counters must be a map of at most 64 entries")
@@ -246,71 +333,9 @@ def decode(payload: bytes) -> Message:
             counters[name] = value
         return StatusMessage(sender, seq, stamp, _str(body, "state", 32),
                              _float(body, "replan_ms", 0.0, 1e7),
-                             _int(body, "iterations", 0, 2**31), _bool(body, "at_goal"), counters)
+                             _int(body, "iterations", 0, 2**31), _bool(body, "at_goal"), counters,
+                             _int(body, "trial", 0, MAX_SEQ))
     raise MessageError(f"unknown message kind {kind!r}")
-
-
-def _only(body: dict, allowed: set[str], common: bool = True) -> None:
-    expected = allowed | ({"v", "k", "id", "seq", "t"} if common else set())
-    extra = set(body) - expected
-    if extra:
-        raise MessageError(f"unexpected field(s) {sorted(map(str, extra))}")
-    missing = expected - set(body)
-    if missing:
-        raise MessageError(f"missing field(s) {sorted(missing)}")
-
-
-def _int(body: dict, key: str, low: int, high: int) -> int:
-    value = body.get(key)
-    if isinstance(value, bool) or not isinstance(value, int):
-        raise MessageError(f"{key}: expected an integer, got {type(value).__name__}")
-    if not low <= value <= high:
-        raise MessageError(f"{key}: {value} outside [{low}, {high}]")
-    return value
-
-
-def _float(body: dict, key: str, low: float = -1e12, high: float = 1e12) -> float:
-    value = body.get(key)
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise MessageError(f"{key}: expected a number, got {type(value).__name__}")
-    value = float(value)
-    if not math.isfinite(value):
-        raise MessageError(f"{key}: not finite")
-    if not low <= value <= high:
-        raise MessageError(f"{key}: {value} outside [{low}, {high}]")
-    return value
-
-
-def _floats(body: dict, key: str, min_len: int, max_len: int,
-            low: float = -1e6, high: float = 1e6) -> list[float]:
-    value = body.get(key)
-    if not isinstance(value, list):
-        raise MessageError(f"{key}: expected an array, got {type(value).__name__}")
-    if not min_len <= len(value) <= max_len:
-        raise MessageError(f"{key}: length {len(value)} outside [{min_len}, {max_len}]")
-    out = []
-    for x in value:
-        if isinstance(x, bool) or not isinstance(x, (int, float)):
-            raise MessageError(f"{key}: expected numbers, got {type(x).__name__}")
-        x = float(x)
-        if not math.isfinite(x) or not low <= x <= high:
-            raise MessageError(f"{key}: value {x} not finite or outside [{low}, {high}]")
-        out.append(x)
-    return out
-
-
-def _str(body: dict, key: str, max_len: int) -> str:
-    value = body.get(key)
-    if not isinstance(value, str) or not 0 < len(value) <= max_len:
-        raise MessageError(f"{key}: expected a string of 1..{max_len} characters")
-    return value
-
-
-def _bool(body: dict, key: str) -> bool:
-    value = body.get(key)
-    if not isinstance(value, bool):
-        raise MessageError(f"{key}: expected true or false, got {type(value).__name__}")
-    return value
 
 
 # --- the receiving side's state: sender check, order and replay -------------------------------
@@ -373,9 +398,12 @@ def to_dict(message: Message) -> dict[str, Any]:
         out.update(x=message.x, y=message.y, yaw=message.yaw, valid=message.valid)
     elif isinstance(message, StatusMessage):
         out.update(state=message.state, replan_ms=message.replan_ms, iterations=message.iterations,
-                   at_goal=message.at_goal, counters=dict(message.counters))
+                   at_goal=message.at_goal, counters=dict(message.counters), trial=message.trial)
     elif isinstance(message, StartMessage):
+        out["trial"] = message.trial
         out["cars"] = {str(car): {"depart": d, "cruise": c} for car, (d, c) in message.departures.items()}
+    elif isinstance(message, StopMessage):
+        out.update(action=message.action, cars=list(message.cars), trial=message.trial)
     return out
 
 
@@ -397,9 +425,16 @@ def from_dict(data: dict[str, Any]) -> Message:
             message = PoseMessage(sender, seq, stamp, data["x"], data["y"], data["yaw"], data["valid"])
         elif kind == "status":
             message = StatusMessage(sender, seq, stamp, data["state"], data["replan_ms"], data["iterations"],
-                                    data["at_goal"], dict(data["counters"]))
+                                    data["at_goal"], dict(data["counters"]), data["trial"])
+        elif kind == "clock":
+            message = ClockMessage(sender, seq, stamp)
         elif kind == "start":
-            message = StartMessage(seq, stamp, {int(car): (c["depart"], c["cruise"]) for car, c in data["cars"].items()})
+            message = StartMessage(seq, stamp, data["trial"],
+                                   {int(car): (c["depart"], c["cruise"]) for car, c in data["cars"].items()})
+        elif kind == "stop":
+            message = StopMessage(seq, stamp, data["action"], tuple(data["cars"]), data["trial"])
+        elif kind == "heartbeat":
+            message = HeartbeatMessage(seq, stamp)
         else:
             raise MessageError(f"unknown message kind {kind!r}")
         return decode(encode(message))

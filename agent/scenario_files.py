@@ -18,7 +18,6 @@ import math
 import tomllib
 import types
 import typing
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
@@ -29,6 +28,8 @@ SHIPPED_PACKAGE = "trustfg.deploy"
 
 def shipped(folder: str = "scenarios") -> list[str]:
     """Names of the configs that ship in ``folder`` of trustfg.deploy, sorted."""
+    from importlib import resources  # only here: trustfg stop reads its config before anything else loads
+
     root = resources.files(SHIPPED_PACKAGE) / folder
     return sorted(entry.name[:-len(".toml")] for entry in root.iterdir() if entry.name.endswith(".toml"))
 
@@ -41,6 +42,8 @@ def read_source(source: str | Path) -> tuple[str, str]:
     name = str(source)
     stem = name[:-len(".toml")] if name.endswith(".toml") else name
     candidates = [stem] if "/" in stem else [f"scenarios/{stem}", stem]
+    from importlib import resources
+
     root = resources.files(SHIPPED_PACKAGE)
     for candidate in candidates:
         entry = root.joinpath(*f"{candidate}.toml".split("/"))

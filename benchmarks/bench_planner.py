@@ -9,6 +9,9 @@ approaches (queues). "cold" solves from the seeded route (coarse to fine); "warm
 receding-horizon replan every 0.2 s, warm-started from the previous plan (what a car
 does at 5 Hz). N = 21 and N = 41 support states, 4 interpolated checks per interval.
 "(out)" counts the peers the planner left out as out of reach (none in this small scene).
+Each cold and warm replan is the whole of what a car does (agent.safe_plan): optimise,
+verify (agent.verify), and retry or fall back when the plan fails; "outcomes" counts how
+the replans ended, "verify" is the check alone, and "plan only" the optimiser without it.
 
 Per iteration: the wall time of one real Levenberg-Marquardt iteration (``iterate()``:
 linearise, damped solve, error at the new point), from the seeded route at full
@@ -33,6 +36,7 @@ import argparse
 import dataclasses
 import statistics
 import time
+from collections import Counter
 
 import gtsam
 import numpy as np
@@ -40,7 +44,9 @@ from gtsam.symbol_shorthand import V, X
 
 from trustfg.agent.interval_factors import chunk_bounds, chunk_keys
 from trustfg.agent.planner import PeerConstraint, PlanRequest, build_graph, interval_problem, plan_trajectory, seed_plan
+from trustfg.agent.safe_plan import plan_safely
 from trustfg.agent.scenario_files import load_scenario
+from trustfg.agent.verify import Bounds, verify
 from trustfg.agent.world import build_sdf
 
 
@@ -164,20 +170,35 @@ def run(n_states: int, n_peers: int, repeats: int) -> dict:
     peers = queued(peer_plans(scenario, sdf, config, t_arrive), n_peers)
     ego, peer = scenario.cars[0], scenario.cars[1]
     request = ego_request(scenario, peers, t_arrive, scenario.safety.epsilon_0(ego.radius_m, peer.radius_m))
-    cold_ms, cold = timed(lambda: plan_trajectory(request, config, sdf), repeats)
+    safety = scenario.safety
+    radii = [scenario.cars[1 + i % (len(scenario.cars) - 1)].radius_m for i in range(n_peers)]  # as queued()
+    bounds = Bounds.of(safety.epsilon_obstacle(ego.radius_m), safety.obstacle_breach(ego.radius_m),
+                       [safety.breach_distance(ego.radius_m, r) for r in radii], scenario.vehicle)
+
+    def replan(req, last):
+        return plan_safely(req, bounds, config, scenario.verify, sdf, last, clock=time.perf_counter)
+
+    plan_only_ms, plain = timed(lambda: plan_trajectory(request, config, sdf), repeats)
+    cold_ms, cold = timed(lambda: replan(request, None), repeats)
+    outcomes = Counter([cold.outcome])
+    verify_ms, _ = timed(lambda: verify(cold.plan, request.peers, bounds, sdf, scenario.verify), repeats * 5)
 
     # Warm replans: every 0.2 s, from the previous plan's state.
-    warm_wall, warm_cpu, iterations = [], [], []
-    plan = cold.plan
+    warm_wall, warm_cpu, iterations, warm_plan_only = [], [], [], []
+    plan, verified = cold.plan, cold.plan
     for step in range(1, repeats + 1):
         t = 0.2 * step
         (p,), (v,) = plan.state_at(t)
         warm_request = dataclasses.replace(request, t_now=t, position=p, velocity=v, warm_start=plan)
-        (wall, cpu), result = timed(lambda: plan_trajectory(warm_request, config, sdf), 1)  # noqa: B023
+        (wall, _), _ = timed(lambda: plan_trajectory(warm_request, config, sdf), 1)  # noqa: B023
+        warm_plan_only.append(wall)
+        (wall, cpu), outcome = timed(lambda: replan(warm_request, verified), 1)  # noqa: B023
         warm_wall.append(wall)
         warm_cpu.append(cpu)
-        iterations.append(result.iterations)
-        plan = result.plan
+        outcomes[outcome.outcome] += 1
+        iterations.append(outcome.result.iterations)
+        plan = outcome.plan
+        verified = plan if outcome.outcome != "fallback" else verified
 
     # One LM iteration of our graph and of the native floor, from the seeded route at
     # full resolution, where LM's first step is accepted in both.
@@ -193,25 +214,32 @@ def run(n_states: int, n_peers: int, repeats: int) -> dict:
     assert first_step_accepted(ours_graph, values, lam) and first_step_accepted(floor_graph, values, lam)
     ours = lm_iteration_ms(ours_graph, values, lam, repeats * 4)
     floor = lm_iteration_ms(floor_graph, values, lam, repeats * 4)
-    return {"N": n_states, "peers": n_peers, "left_out": cold.peers_out_of_reach, "cold_ms": cold_ms,
-            "cold_iterations": cold.iterations, "warm_ms": (statistics.median(warm_wall), statistics.median(warm_cpu)),
-            "warm_iterations": statistics.median(iterations), "ours_iter_ms": ours, "floor_iter_ms": floor}
+    return {"N": n_states, "peers": n_peers, "left_out": plain.peers_out_of_reach, "cold_ms": cold_ms,
+            "cold_iterations": cold.result.iterations,
+            "warm_ms": (statistics.median(warm_wall), statistics.median(warm_cpu)),
+            "warm_iterations": statistics.median(iterations), "verify_ms": verify_ms,
+            "plan_only_ms": (plan_only_ms[0], statistics.median(warm_plan_only)), "outcomes": dict(outcomes),
+            "ours_iter_ms": ours, "floor_iter_ms": floor}
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--repeats", type=int, default=15)
     args = parser.parse_args()
-    print("planner benchmark: one car, 4 interpolated checks per interval; medians, wall / CPU ms")
+    print("planner benchmark: one car, 4 interpolated checks per interval; medians, wall / CPU ms;")
+    print("cold and warm are whole replans: optimise + verify (+ retries or fallback when it fails);")
+    print("verify: the check alone (wall / CPU); plan only: the optimiser alone, cold / warm (wall)")
     print(f"{'N':>3} {'peers':>5} {'(out)':>5} {'cold':>11} {'(iters)':>7} {'warm':>9} {'(iters)':>7} "
-          f"{'LM iteration':>12} {'floor':>9} {'x floor':>11}")
+          f"{'verify':>9} {'plan only':>9} {'LM iteration':>12} {'floor':>9} {'x floor':>11}   outcomes")
     for n, peers in ((21, 3), (41, 3), (41, 15)):
         r = run(n, peers, args.repeats)
         pair = lambda x, f: f"{x[0]:{f}}/{x[1]:{f}}"  # noqa: E731
         ratio = (r["ours_iter_ms"][0] / r["floor_iter_ms"][0], r["ours_iter_ms"][1] / r["floor_iter_ms"][1])
         print(f"{r['N']:>3} {r['peers']:>5} {r['left_out']:>5} {pair(r['cold_ms'], '.1f'):>11} "
               f"{r['cold_iterations']:>7} {pair(r['warm_ms'], '.1f'):>9} {r['warm_iterations']:>7.0f} "
-              f"{pair(r['ours_iter_ms'], '.2f'):>12} {pair(r['floor_iter_ms'], '.2f'):>9} {pair(ratio, '.2f'):>11}")
+              f"{pair(r['verify_ms'], '.2f'):>9} {pair(r['plan_only_ms'], '.1f'):>9} "
+              f"{pair(r['ours_iter_ms'], '.2f'):>12} {pair(r['floor_iter_ms'], '.2f'):>9} {pair(ratio, '.2f'):>11}"
+              f"   {r['outcomes']}")
 
 
 if __name__ == "__main__":

@@ -58,7 +58,7 @@ import time
 from dataclasses import dataclass
 from typing import Callable
 
-from ..agent.config import NatNetConfig
+from ..agent.config import ConfigError, NatNetConfig
 from . import natnet
 from .natnet import (
     ConnectRequest,
@@ -72,7 +72,7 @@ from .natnet import (
 from .natnet_receiver import BodySample, FrameReceiver, NatNetStats
 
 __all__ = ["NatNetClientOptions", "NatNetClient", "NatNetConnectionError", "FrameReceiver",
-           "BodySample", "NatNetStats"]
+           "BodySample", "NatNetStats", "client_options"]
 
 log = logging.getLogger(__name__)
 
@@ -122,6 +122,20 @@ class NatNetClientOptions:
                      "reconnect_after_s", "poll_timeout_s", "close_timeout_s"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be > 0")
+
+
+def client_options(n: NatNetConfig) -> NatNetClientOptions:
+    """The client's options from a fleet config's ``[natnet]``; ConfigError for a version
+    the codec does not decode."""
+    if n.version and n.version not in natnet.STREAM_VERSIONS:
+        raise ConfigError(f"natnet.version: {n.version} is not one the bridge decodes "
+                          f"({', '.join(natnet.STREAM_VERSIONS)})")
+    version = Version.parse(n.version) if n.version else None
+    return NatNetClientOptions(
+        server_address=n.server, command_port=n.command_port, multicast=n.mode == "multicast",
+        multicast_group=n.multicast_group, data_port=n.data_port, local_address=n.local_interface,
+        natnet_version=version, handshake=version is None or n.mode == "unicast",
+    )
 
 
 def _reuse(sock: socket.socket) -> None:

@@ -15,7 +15,8 @@ the command is
 with theta_r = atan2(v_ref), v_r = |v_ref| and omega_r = (v_x a_y - v_y a_x) / |v_ref|^2
 from the plan's velocity and acceleration. When the plan stands still (v_r ~ 0), the car
 turns towards the reference point and creeps to it, or stops once within
-``goal_tolerance_m``. Commands are clamped to the vehicle's limits; no reversing.
+``goal_tolerance_m``; when it faces more than ``TURN_FIRST_RAD`` away from the plan's
+direction, it turns on the spot first. Commands are clamped to the vehicle's limits; no reversing.
 """
 
 from __future__ import annotations
@@ -28,6 +29,8 @@ from ..agent.config import TrackingConfig, VehicleConfig
 from ..agent.gp import Plan
 
 STANDSTILL_MPS = 0.02
+TURN_FIRST_RAD = math.radians(60.0)
+"""A car whose heading is further than this from the plan's direction turns on the spot."""
 
 
 def wrap(angle: float) -> float:
@@ -55,6 +58,11 @@ def track(plan: Plan, t: float, x: float, y: float, yaw: float, gains: TrackingC
     e_x = c * dx + s * dy
     e_y = -s * dx + c * dy
     e_theta = wrap(theta_ref - yaw)
+    if abs(e_theta) > TURN_FIRST_RAD:
+        # Facing away from where the plan goes (after a stop, say): turn on the spot first.
+        # Kanayama's turn rate scales with the reference speed, so a car facing backwards
+        # on a plan that sets off gently would hardly turn, and never catch up.
+        return _clamp(0.0, gains.k_heading * e_theta, limits)
     v = speed_ref * math.cos(e_theta) + gains.k_along * e_x
     omega = omega_ref + speed_ref * (gains.k_cross * e_y + gains.k_heading * math.sin(e_theta))
     return _clamp(v, omega, limits)

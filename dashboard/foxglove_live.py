@@ -12,7 +12,6 @@ again every few seconds for clients that connect late.
 
 from __future__ import annotations
 
-import argparse
 import sys
 import threading
 import time
@@ -23,7 +22,7 @@ from ..agent import messages
 from ..agent.config import Scenario
 from ..agent.scenario_files import load_scenario
 from ..fleet.bus import FleetBus
-from ..fleet.command import configured, stop_on_signals
+from ..fleet.command import command_parser, configured, stop_on_signals
 from ..fleet.foxglove_scene import FoxgloveLog
 from ..fleet.recording import schema
 
@@ -88,7 +87,7 @@ class FoxgloveLive:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="trustfg foxglove", description=__doc__.split("\n")[0])
+    parser = command_parser("trustfg foxglove", __doc__)
     parser.add_argument("--config", required=True, help="fleet config: a TOML file or a shipped name (lab/fleet)")
     parser.add_argument("--host", default="127.0.0.1", help="address to serve on (default %(default)s)")
     parser.add_argument("--port", type=int, default=8766, help="WebSocket port (default %(default)s)")

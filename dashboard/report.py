@@ -9,7 +9,6 @@ report.html, which puts them together with the summary tables.
 
 from __future__ import annotations
 
-import argparse
 import html
 import json
 import sys
@@ -21,6 +20,7 @@ import numpy as np
 from ..agent import metrics
 from ..agent.world import build_sdf
 from ..fleet import figures
+from ..fleet.command import command_parser
 from ..fleet.recording import read_recording, resolve_run
 from ..fleet.runs import RunRecord, arrivals, motion_summary, rounded
 
@@ -182,7 +182,7 @@ td,th{{border:1px solid #ccc;padding:.2em .6em;text-align:right}}.low{{backgroun
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="trustfg report", description=__doc__.split("\n")[0])
+    parser = command_parser("trustfg report", __doc__)
     parser.add_argument("run", type=Path, help="a trustfg sim run folder or an .mcap recording")
     parser.add_argument("--out", type=Path, default=None, help="where to write (default: next to the recording)")
     args = parser.parse_args(argv)

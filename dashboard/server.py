@@ -1,6 +1,6 @@
 """``trustfg dashboard``: the fleet, live in a web page (or a recorded run, replayed).
 
-    trustfg dashboard --config FILE [--host H] [--port P] [--listen ENDPOINT]
+    trustfg dashboard --config FILE [--host H] [--port P] [--listen ENDPOINT] [--operator]
     trustfg dashboard --replay RUN  [--host H] [--port P]
 
 A Starlette (ASGI) app served by uvicorn. Live, it joins the fleet's Zenoh bus as an
@@ -13,6 +13,8 @@ JavaScript: nothing to build.
     GET /               the page
     GET /api/map        the static map: bounds, obstacles, cars, goals
     GET /api/snapshot   the latest snapshot (what the page draws), as JSON
+    POST /api/operator  operator mode only (--operator): e-stop, release, abort, for the
+                        holder of the session's token (dashboard/operator.py says how)
     WS  /ws             {"type": "map"} once, then {"type": "snapshot"} at 10 Hz; the page
                         may send {"type": "seek", "t": T}, {"type": "play"}, {"type": "pause"},
                         {"type": "speed", "value": X} to drive a replay
@@ -20,11 +22,11 @@ JavaScript: nothing to build.
 
 from __future__ import annotations
 
-import argparse
 import asyncio
 import contextlib
 import json
 import logging
+import socket
 import sys
 import time
 from pathlib import Path
@@ -40,7 +42,10 @@ from ..agent import messages
 from ..agent.config import ConfigError, Scenario
 from ..agent.scenario_files import load_scenario
 from ..fleet.bus import FleetBus
+from ..fleet.command import command_parser
+from ..fleet.operator import OperatorSession
 from ..fleet.recording import Recorded, read_recording, resolve_run
+from .operator import OperatorPanel, check_operator_mode, load_token
 from .state import FleetView
 
 log = logging.getLogger(__name__)
@@ -51,26 +56,36 @@ SNAPSHOT_PERIOD_S = 0.1
 
 
 class LiveSource:
-    """The fleet's bus, as an observer."""
+    """The fleet's bus, as an observer (and, in operator mode, as the operator: ``token``)."""
 
     mode = "live"
 
-    def __init__(self, scenario: Scenario, listen: tuple[str, ...]):
+    def __init__(self, scenario: Scenario, listen: tuple[str, ...], token: str | None = None):
         self.scenario = scenario
-        self.bus = FleetBus(scenario.bus, scenario.fleet, None, listen=listen)
+        self.bus = FleetBus(scenario.bus, scenario.fleet, None, listen=listen, operator_kinds=("start", "stop"))
         self.inbox = messages.Inbox()
+        self.token = token
+        self.operator: OperatorPanel | None = None
 
     def open(self) -> None:
         self.bus.open()
+        if self.token is not None:
+            self.operator = OperatorPanel(OperatorSession(self.scenario, self.bus), self.token)
 
     def close(self) -> None:
+        if self.operator is not None:
+            self.operator.session.close()
         self.bus.close()
 
     def feed(self, view: FleetView, wall_dt: float) -> None:
+        if self.operator is not None:
+            self.operator.session.step()  # the heartbeat; the direct path's repeats
         for received in self.bus.drain():
             message = self.inbox.accept(received.payload, key_sender=received.sender)
             if message is not None:
                 view.update(message, received.at)
+                if self.operator is not None:
+                    self.operator.session.heard(message, received.at)
         for car, up in list(self.bus.alive.items()):
             view.liveliness(car, up)
         view.now = max(view.now, time.time())
@@ -78,7 +93,8 @@ class LiveSource:
     def status(self) -> dict:
         return {"mode": "live", "bus": self.bus.counters.get("liveliness_up", 0) > 0,
                 "alive": sorted(c for c, up in self.bus.alive.items() if up),
-                "dropped": dict(self.inbox.dropped)}
+                "dropped": dict(self.inbox.dropped),
+                "operator": self.operator.status() if self.operator is not None else {"enabled": False}}
 
     def control(self, command: dict, view: FleetView) -> FleetView:
         return view
@@ -217,6 +233,17 @@ def create_app(dashboard: Dashboard) -> Starlette:
     async def snapshot(request):
         return JSONResponse(dashboard.latest or dashboard.snapshot())
 
+    async def operator(request):
+        panel = getattr(dashboard.source, "operator", None)
+        if panel is None:
+            return JSONResponse({"ok": False, "error": "not in operator mode (trustfg dashboard --operator)"}, 404)
+        try:
+            body = await request.json()
+        except ValueError:
+            body = None
+        status, answer = panel.act(request.headers.get("authorization"), body)
+        return JSONResponse(answer, status)
+
     async def ws(websocket: WebSocket):
         await websocket.accept()
         await websocket.send_text(json.dumps(dashboard.view.map()))
@@ -250,32 +277,54 @@ def create_app(dashboard: Dashboard) -> Starlette:
 
     return Starlette(routes=[
         Route("/", index), Route("/api/map", map_), Route("/api/snapshot", snapshot),
+        Route("/api/operator", operator, methods=["POST"]),
         WebSocketRoute("/ws", ws), Mount("/static", StaticFiles(directory=STATIC), name="static"),
     ], lifespan=lifespan)
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="trustfg dashboard", description=__doc__.split("\n")[0])
+    parser = command_parser("trustfg dashboard", __doc__)
     source_group = parser.add_mutually_exclusive_group(required=True)
     source_group.add_argument("--config", type=Path, help="fleet config TOML (live)")
     source_group.add_argument("--replay", type=Path, help="a run folder or .mcap recording to play")
-    parser.add_argument("--host", default="127.0.0.1")
-    parser.add_argument("--port", type=int, default=8765)
+    parser.add_argument("--host", default="127.0.0.1", help="address to serve the page on")
+    parser.add_argument("--port", type=int, default=8765, help="port to serve the page on (0: any free one)")
     parser.add_argument("--listen", action="append", default=[], help="Zenoh endpoint to listen on (repeatable)")
+    parser.add_argument("--operator", action="store_true",
+                        help="operator mode: a stop button for the holder of the printed token, and the heartbeat")
+    parser.add_argument("--token-file", type=Path, default=None,
+                        help="operator mode: read the token from this file (default: a new random one)")
+    parser.add_argument("--tls-cert", type=Path, default=None, help="serve HTTPS with this certificate (PEM)")
+    parser.add_argument("--tls-key", type=Path, default=None, help="... and this private key (PEM)")
     args = parser.parse_args(argv)
+    if bool(args.tls_cert) != bool(args.tls_key):
+        parser.error("--tls-cert and --tls-key go together")
+    if args.operator and args.replay:
+        parser.error("--operator needs a live fleet (--config)")
+    token = None
     try:
         if args.replay:
             scenario, events = read_recording(resolve_run(args.replay))
             source: LiveSource | ReplaySource = ReplaySource(scenario, events)
         else:
             scenario = load_scenario(args.config)
-            source = LiveSource(scenario, tuple(args.listen))
+            if args.operator:
+                check_operator_mode(scenario, args.host, https=args.tls_cert is not None)
+                token = load_token(args.token_file)
+            source = LiveSource(scenario, tuple(args.listen), token)
+        sock = socket.socket(socket.AF_INET6 if ":" in args.host else socket.AF_INET, socket.SOCK_STREAM)
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        sock.bind((args.host, args.port))
     except (ConfigError, OSError, ValueError) as exc:
         print(f"trustfg dashboard: {exc}", file=sys.stderr)
         return 2
     dashboard = Dashboard(scenario, source)
-    config = uvicorn.Config(create_app(dashboard), host=args.host, port=args.port, log_level="warning")
+    config = uvicorn.Config(create_app(dashboard), log_level="warning",
+                            ssl_certfile=str(args.tls_cert) if args.tls_cert else None,
+                            ssl_keyfile=str(args.tls_key) if args.tls_key else None)
     server = uvicorn.Server(config)
-    print(f"dashboard: http://{args.host}:{args.port}/", flush=True)
-    server.run()
+    host, port = sock.getsockname()[:2]
+    url = f"{'https' if args.tls_cert else 'http'}://{host if ':' not in host else f'[{host}]'}:{port}/"
+    print(f"dashboard: {url}" + (f"?token={token}" if token else ""), flush=True)
+    server.run(sockets=[sock])
     return 0

@@ -63,6 +63,16 @@ class CarView:
     arrivals: dict[str, deque] = field(default_factory=lambda: defaultdict(deque))
 
 
+def plan_outcomes(status: messages.StatusMessage | None) -> dict[str, int] | None:
+    """How the car's replans ended (verified first try, on retry, fallbacks) and its
+    deadlocks, from the counters of its status (agent.safe_plan, agent.deadlock)."""
+    if status is None:
+        return None
+    c = status.counters
+    return {"first": c.get("plans_first", 0), "retry": c.get("plans_retry", 0),
+            "fallback": c.get("plans_fallback", 0), "deadlocks": c.get("deadlocks", 0)}
+
+
 class FleetView:
     def __init__(self, scenario: Scenario):
         self.scenario = scenario
@@ -200,6 +210,7 @@ class FleetView:
                 "rates": {kind: round(len(w) / RATE_WINDOW_S, 1) for kind, w in car.arrivals.items()},
                 "clock_offset_ms": None if (offset := self.clock_offset(cid)) is None else round(offset * 1e3, 1),
                 "alive": car.alive, "last_heard_s": round(self.now - car.heard_at, 2) if math.isfinite(car.heard_at) else None,
+                "outcomes": plan_outcomes(status),
             })
         trust = {}
         for cid in self.ids:

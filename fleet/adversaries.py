@@ -21,14 +21,13 @@ positives, makespan. Held-out scenes (not looked at while the defences were buil
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import time
 
 from ..agent.config import AttackConfig, Scenario
 from ..agent.scenario_files import load_scenario
 from . import stats
-from .command import configured
+from .command import command_parser, configured
 from .experiments import (
     Progress,
     _pool,
@@ -148,7 +147,7 @@ def table(summary: dict, title: str) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="trustfg experiment adversaries", description=__doc__.split("\n")[0])
+    parser = command_parser("trustfg experiment adversaries", __doc__)
     study_options(parser, seeds=50)
     parser.add_argument("--scenes", nargs="+", default=["lab", "intersection"], help="scenes (default: lab intersection)")
     parser.add_argument("--attacks", nargs="+", choices=[*ATTACKS, *HONEST], default=[*ATTACKS, *HONEST],

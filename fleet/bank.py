@@ -7,8 +7,10 @@ Per scene and method, every seed is one in-process run (fleet.fleet_sim, or
 fleet.baselines for ORCA) with the same start delays and cruise speeds for every method
 (fleet_sim.draw_departures from the seed). Methods:
 
-* ``full``: the whole pipeline as shipped (every trust factor, and whatever the car
-  pipeline switches on by default);
+* ``full``: the whole pipeline as shipped: every trust factor, and the car pipeline's
+  plan verification with its retries and braking fallback, the proximity guard and the
+  deadlock watch (fleet.fleet_sim runs them as the car process does; ``--set
+  verify.enabled=false`` and the like switch them off);
 * ``fixed``: no trust factors (no consistency factor, no transparency scaling) and every
   plan believed (trust.reject_plans = false): the proximity hinge at eps_0 from every
   peer; the rest of the pipeline as in ``full``;
@@ -31,7 +33,6 @@ of the pipeline off for an ablation (``--set planner.interp_checks=8``).
 
 from __future__ import annotations
 
-import argparse
 import copy
 import hashlib
 import json
@@ -49,7 +50,7 @@ import numpy as np
 
 from ..agent.config import ConfigError, Scenario
 from ..agent.scenario_files import read_source, scenario_from_dict
-from .command import configured
+from .command import command_parser, configured
 from .experiments import BELIEVING, NO_TRUST, Progress, _sdf
 from .fleet_sim import simulate
 from .runs import RunRecord, motion_summary
@@ -244,7 +245,7 @@ def machine() -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="trustfg experiment bank", description=__doc__.split("\n")[0])
+    parser = command_parser("trustfg experiment bank", __doc__)
     parser.add_argument("--scenes", nargs="+", default=list(BANK), metavar="SCENE",
                         help="scene names or files (default: the bank, " + " ".join(BANK) + ")")
     parser.add_argument("--seed", type=int, default=0, help="first seed (default 0)")

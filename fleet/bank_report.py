@@ -9,6 +9,8 @@ Per scene and method (and pooled over the bank's scenes, and over the fresh scen
     start delays are the same for every method)                         over successful runs
     replan time: the median of each run's median (ORCA: one RVO2 step for the whole fleet
     divided by the number of cars)
+    how the replans ended (agent.safe_plan: verified first try, on a retry, braking
+    fallback) and the deadlocks the cars detected (agent.deadlock), summed over the runs
 
 95 % confidence intervals are percentile bootstraps (BOOTSTRAP_RESAMPLES resamples of the
 runs, numpy, seeded per cell, so a report is reproducible). With no event in n runs the
@@ -21,6 +23,8 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+
+from .runs import plan_outcomes
 
 BOOTSTRAP_RESAMPLES = 2000
 BOOTSTRAP_SEED = 0
@@ -63,6 +67,11 @@ def cell(runs: list[dict]) -> dict:
                     "runs": int(values.size)}
     p95 = [r["replan_ms_p95"] for r in runs if r.get("replan_ms_p95") is not None]
     out["replan_ms_p95_max"] = _r(max(p95)) if p95 else None
+    pipeline = plan_outcomes([r.get("counters", {}) for r in runs])  # each run's counters are its cars' sums
+    replans = sum(pipeline["plans"].values())
+    out["plans"] = pipeline["plans"] | {f"{k}_share": round(pipeline["plans"][k] / replans, 4) if replans else None
+                                        for k in ("retry", "fallback")}
+    out["deadlocks_detected"] = pipeline["deadlocks"]
     return out
 
 
@@ -112,11 +121,12 @@ def markdown(report: dict) -> str:
     lines += ["Runs that reached every goal safely / runs (failures: b breach, c contact, d deadlock, t timeout), "
               "least clearance between cars:", "", overview(report)]
     header = ("| scene | method | runs | success % | breach % | contact % | deadlock % | timeout % "
-              "| least clearance min / median | obstacle clearance min | makespan | flowtime | replan ms |")
+              "| least clearance min / median | obstacle clearance min | makespan | flowtime | replan ms "
+              "| replans retried / fell back % |")
     groups = list(dict.fromkeys(c["group"] for c in report["summary"]))
     for group in groups:
         lines += [f"**{'Bank scenes' if group == 'bank' else 'Fresh scenes (held out)'}**", "", header,
-                  "|" + " --- |" * 12]
+                  "|" + " --- |" * 13]
         for c in (c for c in report["summary"] if c["group"] == group):
             label = report["methods"].get(c["method"], {}).get("label", c["method"])
             rates = [_rate(c["rates"][o], c["runs"]) for o in OUTCOMES]
@@ -124,7 +134,8 @@ def markdown(report: dict) -> str:
             lines.append(
                 f"| {c['scene']} | {label} | {c['runs']} | " + " | ".join(rates)
                 + f" | {lc['min']:.3f} / {lc['median']:.3f} | {c['obstacle_clearance_m']['min']:.3f}"
-                + f" | {_median(c['makespan_s'])} | {_median(c['flowtime_s'])} | {_median(c['replan_ms_median'], 2)} |")
+                + f" | {_median(c['makespan_s'])} | {_median(c['flowtime_s'])} | {_median(c['replan_ms_median'], 2)}"
+                + f" | {_shares(c['plans'])} |")
         lines.append("")
     return "\n".join(lines)
 
@@ -150,6 +161,12 @@ def overview(report: dict) -> str:
                          + f", {c['least_clearance_m']['min']:.3f} m")
         lines.append(f"| {scene} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
+
+
+def _shares(plans: dict) -> str:
+    if plans["retry_share"] is None:
+        return "-"
+    return f"{100 * plans['retry_share']:.1f} / {100 * plans['fallback_share']:.1f}"
 
 
 def _rate(rate: list[float], n: int) -> str:

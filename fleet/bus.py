@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import logging
+import re
 import threading
 import time
 from collections import Counter, deque
@@ -24,8 +25,9 @@ from typing import Callable
 import zenoh
 import zenoh.ext as zext
 
+from ..agent import messages
 from ..agent.config import BusConfig
-from .keys import ALIVE, KINDS, START, every_car, fleet_key, key, parse_key
+from .keys import ALIVE, CLOCK, HEARTBEAT, KINDS, OPERATOR, START, STOP, every_car, fleet_key, key, parse_key
 
 log = logging.getLogger(__name__)
 
@@ -37,23 +39,72 @@ class BusError(RuntimeError):
 
 
 def zenoh_config(bus: BusConfig, extra_listen: tuple[str, ...] = ()) -> zenoh.Config:
-    """A zenoh.Config from our BusConfig (on top of ``bus.zenoh_config`` if given)."""
+    """A zenoh.Config from our BusConfig, on top of the file ``bus.zenoh_config`` if given.
+
+    The file is the base and ``[bus]`` completes it, never silently overrides it: endpoints
+    are added to the file's lists; ``mode``, multicast scouting and its interface come from
+    the file when it sets them, and a ``[bus]`` value that differs both from the file's and
+    from its own default is an error naming both (BusError)."""
     try:
-        config = zenoh.Config.from_file(str(Path(bus.zenoh_config))) if bus.zenoh_config else zenoh.Config()
-        config.insert_json5("mode", json.dumps(bus.mode))
-        listen = [*bus.listen, *extra_listen]
+        try:
+            config = zenoh.Config.from_file(str(Path(bus.zenoh_config))) if bus.zenoh_config else zenoh.Config()
+        except Exception as exc:
+            raise BusError(f"bad Zenoh configuration in bus.zenoh_config {bus.zenoh_config}: {_said(exc)}") from exc
+        default = BusConfig()
+        for path, field_name in (("mode", "mode"), ("scouting/multicast/enabled", "multicast_scouting"),
+                                 ("scouting/multicast/interface", "multicast_interface"),
+                                 ("transport/unicast/max_links", "max_links")):
+            ours = getattr(bus, field_name)
+            theirs = _get(config, path) if bus.zenoh_config else None
+            if theirs is None:
+                if field_name != "multicast_interface" or ours:
+                    config.insert_json5(path, json.dumps(ours))
+            elif theirs != ours:
+                if ours != getattr(default, field_name):
+                    raise BusError(f"bus.{field_name} = {ours!r} contradicts {path} = {theirs!r} in "
+                                   f"{bus.zenoh_config}: set it in one place")
+                log.info("bus.%s: %r from %s", field_name, theirs, bus.zenoh_config)
+        if _get(config, "scouting/multicast/enabled") is False and _get(config, "scouting/delay") is None:
+            # Zenoh waits scouting/delay (500 ms) in open() for peers to scout; with listed
+            # endpoints there is nothing to scout (and an e-stop must not wait half a second).
+            config.insert_json5("scouting/delay", "0")
+        listen = _merged(_get(config, "listen/endpoints"), [*bus.listen, *extra_listen])
+        fixed = [e for e in listen if re.search(r":0(?:$|[?#])", e)]
+        if fixed:
+            raise BusError(f"listen endpoint {fixed[0]}: port 0 would be a port nobody can be told; name one")
         if listen:
             config.insert_json5("listen/endpoints", json.dumps(listen))
-        connect = [e for e in bus.connect if e not in listen]  # a fleet-wide list may name us
+        connect = [e for e in _merged(_get(config, "connect/endpoints"), list(bus.connect))
+                   if e not in listen]  # a fleet-wide list may name us
         if connect:
             config.insert_json5("connect/endpoints", json.dumps(connect))
-        config.insert_json5("scouting/multicast/enabled", json.dumps(bus.multicast_scouting))
-        config.insert_json5("transport/unicast/max_links", json.dumps(bus.max_links))
-        if bus.multicast_interface:
-            config.insert_json5("scouting/multicast/interface", json.dumps(bus.multicast_interface))
+    except BusError:
+        raise
     except Exception as exc:  # zenoh raises ZError and others for bad files or values
-        raise BusError(f"bad Zenoh configuration: {exc}") from exc
+        raise BusError(f"bad Zenoh configuration: {_said(exc)}") from exc
     return config
+
+
+def _said(exc: Exception) -> str:
+    """Zenoh's message on one line, without the Rust source location it ends with."""
+    return " ".join(line.strip() for line in str(exc).split(" at /")[0].splitlines() if line.strip())
+
+
+def _get(config: zenoh.Config, path: str):
+    """A value of a Zenoh config (None when unset)."""
+    return json.loads(config.get_json(path))
+
+
+def _merged(theirs, ours: list[str]) -> list[str]:
+    """The file's endpoints, then ours. Per-mode lists (a map) are Zenoh's defaults, which
+    ours replace as before."""
+    if isinstance(theirs, dict):
+        theirs = []
+    merged = []
+    for endpoint in [*(theirs or []), *ours]:
+        if endpoint not in merged:
+            merged.append(endpoint)
+    return merged
 
 
 @dataclass(frozen=True)
@@ -66,17 +117,19 @@ class Received:
 
 
 class FleetBus:
-    """One process's Zenoh presence. A car (``car_id``) publishes under its own keys; an
-    observer (``car_id=None``: dashboard, recorder, operator) only listens and may send
-    the start message."""
+    """One process's Zenoh presence. A car (``car_id``) publishes under its own keys and
+    answers clock queries; an observer (``car_id=None``: dashboard, recorder, operator)
+    listens, may send the operator's messages (start, stop, heartbeat) and query clocks.
+    ``kinds`` are the car kinds received, ``operator_kinds`` the operator's."""
 
     def __init__(self, config: BusConfig, fleet: str, car_id: int | None = None, *,
                  listen: tuple[str, ...] = (), kinds: tuple[str, ...] = KINDS,
-                 clock: Callable[[], float] = time.time):
+                 operator_kinds: tuple[str, ...] = OPERATOR, clock: Callable[[], float] = time.time):
         self.config = config
         self.fleet = fleet
         self.car_id = car_id
         self.kinds = kinds
+        self.operator_kinds = operator_kinds
         self.clock = clock
         self._listen = listen
         self._queue: deque[Received] = deque()
@@ -101,13 +154,18 @@ class FleetBus:
 
     def open(self) -> None:
         try:
-            self._session = zenoh.open(zenoh_config(self.config, self._listen))
+            config = zenoh_config(self.config, self._listen)
+            self._session = zenoh.open(config)
         except BusError:
             raise
         except Exception as exc:
             raise BusError(f"cannot open a Zenoh session: {exc}") from exc
         session = self._session
         fleet = self.fleet
+        listening = _get(config, "listen/endpoints")
+        if isinstance(listening, list) and listening:
+            log.info("%s: Zenoh listening on %s", f"car {self.car_id}" if self.car_id else "operator/observer",
+                     ", ".join(listening))
         if self.car_id is not None:
             cid = self.car_id
             # Plans go two ways. Best effort (on a UDP link, ``?rel=0``, where the peers have
@@ -133,10 +191,14 @@ class FleetBus:
                 key(fleet, cid, "status"), reliability=zenoh.Reliability.BEST_EFFORT,
                 congestion_control=zenoh.CongestionControl.DROP)
             self._entities.append(session.liveliness().declare_token(key(fleet, cid, ALIVE)))
+            self._entities.append(session.declare_queryable(key(fleet, cid, CLOCK), self._on_clock_query))
         else:
-            self._publishers[START] = zext.declare_advanced_publisher(
-                session, fleet_key(fleet, START), cache=zext.CacheConfig(max_samples=1), publisher_detection=True,
-                sample_miss_detection=zext.MissDetectionConfig(heartbeat=0.5))
+            for name in (START, STOP):  # cached: a car process that joins late gets the latest
+                self._publishers[name] = zext.declare_advanced_publisher(
+                    session, fleet_key(fleet, name), cache=zext.CacheConfig(max_samples=1), publisher_detection=True,
+                    sample_miss_detection=zext.MissDetectionConfig(heartbeat=0.5))
+            self._publishers[HEARTBEAT] = session.declare_publisher(
+                fleet_key(fleet, HEARTBEAT), congestion_control=zenoh.CongestionControl.DROP)
         for kind in self.kinds:
             pattern = every_car(fleet, kind)
             if kind == "plan":
@@ -147,9 +209,13 @@ class FleetBus:
             else:
                 subscriber = session.declare_subscriber(pattern, self._on_sample)
             self._entities.append(subscriber)
-        self._entities.append(zext.declare_advanced_subscriber(
-            session, fleet_key(fleet, START), self._on_sample,
-            history=zext.HistoryConfig(detect_late_publishers=True, max_samples=1)))
+        for name in self.operator_kinds:
+            if name == HEARTBEAT:
+                self._entities.append(session.declare_subscriber(fleet_key(fleet, name), self._on_sample))
+            else:
+                self._entities.append(zext.declare_advanced_subscriber(
+                    session, fleet_key(fleet, name), self._on_sample,
+                    history=zext.HistoryConfig(detect_late_publishers=True, max_samples=1)))
         self._entities.append(session.liveliness().declare_subscriber(
             every_car(fleet, ALIVE), self._on_liveliness, history=True))
 
@@ -194,8 +260,8 @@ class FleetBus:
     # --- sending ---------------------------------------------------------------------------
 
     def publish(self, kind: str, payload: bytes, *, repeat: bool = False) -> None:
-        """Publish one of our own messages (kind in KINDS, or "start" for an observer). A new
-        plan goes best effort and reliably; a ``repeat`` of the latest, best effort only."""
+        """Publish one of our own messages (kind in KINDS, or the operator's for an observer).
+        A new plan goes best effort and reliably; a ``repeat`` of the latest, best effort only."""
         publisher = self._publishers.get(kind)
         if publisher is None:
             raise BusError(f"this bus cannot publish {kind!r} (car_id={self.car_id})")
@@ -226,6 +292,34 @@ class FleetBus:
             self._queue.append(item)
             self.counters[f"received_{kind}"] += 1
         self._arrived.set()
+
+    def _on_clock_query(self, query: zenoh.Query) -> None:
+        """A car's clock, to the operator's query (never blocks: encode and reply)."""
+        try:
+            query.reply(query.key_expr, messages.encode(messages.ClockMessage(self.car_id, 0, self.clock())))
+            self.counters["clock_queries"] += 1
+        except Exception as exc:  # the asker may be gone already
+            log.debug("clock reply failed: %s", exc)
+
+    def query_clocks(self, car_id: int, timeout_s: float = 0.5) -> tuple[float, float, float] | None:
+        """Ask car ``car_id``'s process for its clock: (sent, its clock, received) on our
+        clock, or None if it did not answer in time. Blocks up to ``timeout_s``."""
+        if self._session is None:
+            raise BusError("the bus is not open")
+        sent = self.clock()
+        try:
+            for reply in self._session.get(key(self.fleet, car_id, CLOCK), timeout=timeout_s):
+                received = self.clock()
+                if reply.ok is None:
+                    continue
+                answer = messages.decode(reply.ok.payload.to_bytes())
+                if isinstance(answer, messages.ClockMessage) and answer.sender == car_id:
+                    return sent, answer.stamp, received
+        except messages.MessageError:
+            self.counters["bad_clock_replies"] += 1
+        except Exception as exc:  # a closed session, a refused query
+            log.debug("clock query to car %d failed: %s", car_id, exc)
+        return None
 
     def _on_liveliness(self, sample: zenoh.Sample) -> None:
         parsed = parse_key(self.fleet, str(sample.key_expr))

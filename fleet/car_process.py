@@ -5,14 +5,24 @@ Threads, each owning what it touches:
 * the NatNet client's socket thread hands every frame to a queue (and keeps the latest
   pose of every rigid body);
 * Zenoh's callbacks hand every fleet message to the bus queue (trustfg.fleet.bus);
-* the control thread, at ``control.command_rate_hz`` on absolute deadlines, reads the
-  car's own latest pose and the current plan and sends one command datagram: the
-  tracking command, or STOP when there is no fresh pose (older than
-  ``control.pose_timeout_s``), no plan, no start yet, or the car has arrived; the
+* the control thread, at ``control.command_rate_hz`` on absolute deadlines from the
+  moment the process starts, reads the car's own latest pose and the current plan and
+  sends one command datagram: the tracking command, or STOP when there is no fresh pose
+  (older than ``control.pose_timeout_s``, or no Motive yet), no plan, or the operator's
+  protocol (agent.operation: waiting, arrived, e-stopped, before the departure, deadman)
+  does not let the car drive; E_STOP while e-stopped, RELEASE after a release. The
   tracking speed is capped by the proximity guard (bridge.guard) against the other cars
-  it sees and the walls of the map;
-* the main thread runs the agent: it drains frames and messages, gathers evidence,
-  replans every ``control.replan_period_s`` and publishes plan, trust, pose and status.
+  it sees and the walls of the map. Every ``control.link_ping_period_s`` it PINGs the car
+  and reads the answers (the link is up; the car's e-stop latch);
+* the main thread runs the agent: it drains frames and messages, hands the operator's
+  messages to the :class:`~trustfg.agent.operation.Operation`, gathers evidence, replans
+  every ``control.replan_period_s`` and publishes plan, trust, pose and status (at once
+  when the mode changes). Each trial's start gives the car a fresh agent.
+
+Starting before Motive, the bus or the peers are reachable, the process keeps its car
+stopped (STOP from the first tick), says in one line what it waits for -- again whenever
+that changes -- and retries (NatNet from a connector thread, the bus every
+``control.retry_s``): never a traceback.
 
 A car that does not move although it is told to (its command link is cut, it is
 blocked, its motors are off) is *stuck*: after ``STUCK_AFTER_S`` of commanded motion
@@ -31,34 +41,29 @@ a simulation switch: the same process drives a real car or one of mocap_sim's.
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
-import itertools
-import json
 import logging
 import math
 import sys
 import threading
 import time
 from collections import Counter, deque
-from dataclasses import dataclass, field
 from pathlib import Path
-
-import numpy as np
 
 from ..agent import messages
 from ..agent.car_agent import CarAgent
 from ..agent.config import CarConfig, ConfigError, Scenario
 from ..agent.gp import standing
+from ..agent.operation import Mode, Operation
 from ..agent.scenario_files import load_scenario
 from ..agent.world import build_sdf
 from ..bridge import natnet
-from ..bridge.carlink import CommandSender, Flags, link_key
-from ..bridge.guard import speed_cap
-from ..bridge.natnet_client import NatNetClient, NatNetClientOptions
-from ..bridge.tracking import track
-from .bus import FleetBus, Received
-from .command import configured, stop_on_signals
+from ..bridge.carlink import SOURCE_CAR_PROCESS, Answer, CommandSender, Flags, link_key
+from ..bridge.drive import drive
+from ..bridge.natnet_client import NatNetClient, NatNetConnectionError, client_options
+from .bus import BusError, FleetBus, Received, zenoh_config
+from .car_report import ControlStats, WaitingLog, status_counters, waiting_for, write_stats
+from .command import command_parser, configured, stop_on_signals
 from .laps import Laps
 from .ticker import ticks
 
@@ -70,88 +75,52 @@ STUCK_COMMAND_MPS = 0.1
 STUCK_MOTION_MPS = 0.03
 
 
-def natnet_options(scenario: Scenario) -> NatNetClientOptions:
-    """The NatNet client's options from the config; ConfigError for a version the codec
-    does not decode."""
-    n = scenario.natnet
-    if n.version and n.version not in natnet.STREAM_VERSIONS:
-        raise ConfigError(f"natnet.version: {n.version} is not one the bridge decodes "
-                          f"({', '.join(natnet.STREAM_VERSIONS)})")
-    version = natnet.Version.parse(n.version) if n.version else None
-    return NatNetClientOptions(
-        server_address=n.server, command_port=n.command_port, multicast=n.mode == "multicast",
-        multicast_group=n.multicast_group, data_port=n.data_port, local_address=n.local_interface,
-        natnet_version=version, handshake=version is None or n.mode == "unicast",
-    )
-
-
-@dataclass
-class ControlStats:
-    """Timing of the control loop, measured on the loop itself."""
-
-    sent: int = 0
-    stops: int = 0
-    stale_pose_stops: int = 0
-    guard_limited: int = 0
-    """Ticks whose forward speed the proximity guard lowered (bridge.guard)."""
-    late_ms: deque = field(default_factory=lambda: deque(maxlen=100_000))
-    """Lateness of the latest ticks (bounded: a lab run may last hours)."""
-    late_p99_by_minute: deque = field(default_factory=lambda: deque(maxlen=24 * 60))
-    """p99 lateness of every minute of ticks, ms (does the timing hold over hours?)."""
-    ticks: int = 0
-    started: float = 0.0
-    stopped: float = 0.0
-
-    def add(self, late_ms: float, per_minute: int) -> None:
-        self.late_ms.append(late_ms)
-        self.ticks += 1
-        if self.ticks % per_minute == 0:
-            minute = list(itertools.islice(reversed(self.late_ms), per_minute))
-            self.late_p99_by_minute.append(round(float(np.percentile(minute, 99)), 3))
-
-    def summary(self) -> dict:
-        elapsed = max(self.stopped - self.started, 1e-9)
-        late = np.array(self.late_ms) if self.late_ms else np.zeros(1)
-        return {
-            "sent": self.sent, "stops": self.stops, "stale_pose_stops": self.stale_pose_stops,
-            "guard_limited": self.guard_limited, "rate_hz": round(self.sent / elapsed, 2),
-            "jitter_ms_p50": round(float(np.percentile(late, 50)), 3),
-            "jitter_ms_p99": round(float(np.percentile(late, 99)), 3),
-            "jitter_ms_max": round(float(np.max(late)), 3),
-            "late_ms_p99_by_minute": list(self.late_p99_by_minute),
-        }
-
-
 class CarProcess:
     """Everything one car runs; ``run()`` returns when ``stop`` is set."""
 
     def __init__(self, scenario: Scenario, car: CarConfig, clock=None):
         if not car.link:
             raise ConfigError(f"cars[id={car.id}].link: a car process needs the address of its car")
+        try:  # a bad [bus] or zenoh_config file is the config's fault: one line now, not retries
+            zenoh_config(scenario.bus, car.listen)
+        except BusError as exc:
+            raise ConfigError(str(exc)) from None
         self.scenario = scenario
         self.car = car
         if clock is None and car.clock_offset_s:
             log.warning("car %d: running with a clock %+.3f s off the fleet's (clock_offset_s, for tests)",
                         car.id, car.clock_offset_s)
         self.clock = clock or (lambda: time.time() + car.clock_offset_s)
-        self.natnet = natnet_options(scenario)
+        self.natnet = client_options(scenario.natnet)
         link_key(car)  # a missing or bad key is a config error now, not when driving
         self.stop = threading.Event()
-        self.agent = CarAgent(car=car, scenario=scenario, sdf=build_sdf(scenario.world),
-                              depart_at=math.inf)
+        self.sdf = build_sdf(scenario.world)
+        self.agent = self._new_agent()
+        self.operation = Operation(car.id, scenario.operator)
+        self._operation_lock = threading.Lock()  # the main and the control thread both use it
         self.inbox = messages.Inbox()
         self.frames: deque = deque(maxlen=4096)
         self.counters: Counter = Counter()
         self.control = ControlStats()
-        self.started = False
-        self.state = "waiting"
+        self.state = Mode.WAITING.value
+        self._natnet: NatNetClient | None = None  # set by the connector thread once Motive answers
+        self._natnet_problem = "connecting"
+        self._link_answered = -math.inf  # when the car last answered a PING (fleet clock)
+        self._car_latched = False
+        self._waiting = WaitingLog(car.id)
         self._plan = None  # what the control thread follows (swapped atomically)
+        self._last_plans: dict[int, tuple[messages.PlanMessage, float]] = {}
         self._bodies = {c.body_id: c.id for c in scenario.cars}
         self._seq: Counter = Counter()
         self._alive: dict[int, bool] = {}
         self.stuck = False
         self._motion: deque = deque()  # (t, x, y, commanded v) of the control loop
         self.laps = Laps(car, scenario.control.laps, scenario.control.lap_turn_s)
+
+    def _new_agent(self) -> CarAgent:
+        """A fresh mind: a car starts every trial from what it sees, not from the last one."""
+        return CarAgent(car=self.car, scenario=self.scenario, sdf=self.sdf, depart_at=math.inf,
+                        clock=time.perf_counter)
 
     # --- inputs ---------------------------------------------------------------------------
 
@@ -178,25 +147,55 @@ class CarProcess:
         message = self.inbox.accept(received.payload, key_sender=received.sender)
         if message is None:
             return
-        if isinstance(message, messages.StartMessage):
+        if isinstance(message, messages.HeartbeatMessage):
+            with self._operation_lock:
+                unheard_start = self.operation.heard_operator(received.at)
+            if unheard_start is not None:
+                self._start(unheard_start)
+        elif isinstance(message, messages.StartMessage):
             self._start(message)
+        elif isinstance(message, messages.StopMessage):
+            with self._operation_lock:
+                changed = self.operation.take_stop(message, self.clock())
+            if changed:
+                log.warning("car %d: %s", self.car.id, self.operation.reason)
         elif isinstance(message, (messages.PlanMessage, messages.TrustReport)):
             self.agent.receive(message, received.at)
+            if isinstance(message, messages.PlanMessage):
+                self._last_plans[message.sender] = (message, received.at)  # for the next trial's agent
 
-    def _start(self, message: messages.StartMessage) -> None:
-        if self.started or self.car.id not in message.departures:
-            return
-        depart, cruise = message.departures[self.car.id]
-        self.agent.set_departure(depart, cruise)
-        self.started = True
-        self.state = "driving"
-        log.info("car %d: start at %.2f (in %.2f s), cruise %.2f m/s", self.car.id, depart,
-                 depart - self.clock(), cruise)
+    def _start(self, message: messages.StartMessage | None) -> None:
+        """A start from the operator (None: ``control.start_timeout_s`` ran out)."""
+        now = self.clock()
+        with self._operation_lock:
+            if message is None:
+                self.operation.take_start_without_operator(now, self.scenario.planner.cruise_speed_mps)
+                taken = True
+            else:
+                before = self.operation.reason
+                taken = self.operation.take_start(message, now)
+                if not taken and self.operation.reason != before:
+                    log.warning("car %d: %s", self.car.id, self.operation.reason)
+            if not taken:
+                return
+            depart, cruise = self.operation.depart_at, self.operation.cruise_mps
+            self._plan = None
+            agent = self._new_agent()
+            agent.set_departure(depart, cruise)
+            for plan, at in self._last_plans.values():  # what the peers intend, as last heard
+                agent.receive(plan, at)
+            self.agent = agent
+            self.laps = Laps(self.car, self.scenario.control.laps, self.scenario.control.lap_turn_s)
+            self.stuck = False
+            self._motion.clear()
+        log.info("car %d: trial %d: start at %.2f (in %.2f s), cruise %.2f m/s", self.car.id,
+                 self.operation.trial, depart, depart - now, cruise)
 
     # --- the control thread -----------------------------------------------------------------
 
-    def _own_pose(self, natnet_client: NatNetClient) -> tuple[float, float, float] | None:
-        sample = natnet_client.latest(self.car.body_id)
+    def _own_pose(self) -> tuple[float, float, float] | None:
+        natnet_client = self._natnet
+        sample = natnet_client.latest(self.car.body_id) if natnet_client is not None else None
         if sample is None or not sample.body.tracking_valid:
             return None
         if time.monotonic() - sample.received_s > self.scenario.control.pose_timeout_s:
@@ -204,11 +203,12 @@ class CarProcess:
         return natnet.to_ground_plane(sample.body.position, sample.body.orientation,
                                       self.scenario.natnet.up_axis)
 
-    def _others_seen(self, natnet_client: NatNetClient) -> list[tuple[float, float, float, float]]:
+    def _others_seen(self) -> list[tuple[float, float, float, float]]:
         """Fresh, tracked poses (x, y, yaw) and radii of every other car of the fleet."""
         now_mono, up = time.monotonic(), self.scenario.natnet.up_axis
         others = []
-        for body_id, sample in natnet_client.latest_all().items():
+        natnet_client = self._natnet
+        for body_id, sample in (natnet_client.latest_all() if natnet_client is not None else {}).items():
             car_id = self._bodies.get(body_id)
             if (car_id is None or car_id == self.car.id or not sample.body.tracking_valid
                     or now_mono - sample.received_s > self.scenario.control.pose_timeout_s):
@@ -218,42 +218,60 @@ class CarProcess:
                 others.append((x, y, yaw, self.agent.radius(car_id)))
         return others
 
-    def _control_loop(self, natnet_client: NatNetClient, sender: CommandSender) -> None:
+    def _control_loop(self, sender: CommandSender) -> None:
         self.control.started = time.monotonic()
+        next_ping = self.control.started
         for deadline, now_mono in ticks(1.0 / self.scenario.control.command_rate_hz, self.stop):
             self.control.add(max(0.0, now_mono - deadline) * 1e3, int(60 * self.scenario.control.command_rate_hz))
             try:
-                self._command(natnet_client, sender)
+                self._command(sender)
+                if now_mono >= next_ping:
+                    next_ping = max(next_ping + self.scenario.control.link_ping_period_s, now_mono)
+                    sender.send(0.0, 0.0, Flags.STOP | Flags.PING)
+                for answer in sender.answers():
+                    self._answered(answer)
             except Exception:  # a bad tick must not take the car's brakes with it
                 log.exception("car %d: control tick failed; commanding stop", self.car.id)
-                sender.send(0.0, 0.0, Flags.STOP)
+                sender.send(0.0, 0.0, Flags.STOP | (Flags.E_STOP if self.operation.mode == Mode.E_STOPPED else 0))
         self.control.stopped = time.monotonic()
 
-    def _command(self, natnet_client: NatNetClient, sender: CommandSender) -> None:
-        pose = self._own_pose(natnet_client)
+    def _answered(self, answer: Answer) -> None:
+        """The car answered a PING: its link is up; what it says of its e-stop latch."""
+        now = self.clock()
+        self._link_answered = now
+        self._car_latched = answer.e_stop_latched
+        with self._operation_lock:
+            changed = self.operation.car_reports_latch(answer.e_stop_latched, now)
+        if changed:
+            log.warning("car %d: %s", self.car.id, self.operation.reason)
+
+    def _command(self, sender: CommandSender) -> None:
+        pose = self._own_pose()
         plan = self._plan
         now = self.clock()
-        turn = pose and self.laps.turn_command(now, pose[2], self.scenario.tracking, self.scenario.vehicle)
+        with self._operation_lock:
+            if self.operation.check_deadman(now):
+                log.warning("car %d: %s", self.car.id, self.operation.reason)
+            may_drive = self.operation.may_drive(now)
+            link = self.operation.next_flags(now)
+        go = may_drive and not self.agent.at_goal
+        flags = Flags.E_STOP if link.e_stop else Flags.RELEASE if link.release else Flags.NONE
+        turn = pose and may_drive and not link.e_stop and self.laps.turn_command(
+            now, pose[2], self.scenario.tracking, self.scenario.vehicle)
         if pose is None:
             self.control.stale_pose_stops += 1
             self.control.stops += 1
-            sender.send(0.0, 0.0, Flags.STOP)
+            sender.send(0.0, 0.0, Flags.STOP | flags)
         elif turn:  # between laps: turning in place towards the next leg
-            sender.send(*turn)
-        elif plan is None or not self.started or now < self.agent.depart_at or self.agent.at_goal:
+            sender.send(*turn, flags)
+        elif plan is None or not go or link.e_stop:
             self.control.stops += 1
-            sender.send(0.0, 0.0, Flags.STOP)
-        else:
-            v, omega = track(plan, now, pose[0], pose[1], pose[2], self.scenario.tracking,
-                             self.scenario.vehicle)
-            if self.scenario.guard.enabled:
-                cap = speed_cap(*pose, self.car.radius_m, self._others_seen(natnet_client),
-                                self.scenario.guard, self.scenario.safety, self.agent.sdf)
-                if v > cap:
-                    v = cap
-                    self.control.guard_limited += 1
-            sender.send(v, omega)
-            self._watch_motion(now, pose, v)
+            sender.send(0.0, 0.0, Flags.STOP | flags)
+        else:  # the control step both simulations share (bridge.drive)
+            command = drive(plan, now, pose, True, self._others_seen, self.car.radius_m, self.scenario, self.sdf)
+            self.control.guard_limited += command.guard_limited
+            sender.send(command.v, command.omega, flags)
+            self._watch_motion(now, pose, command.v)
         self.control.sent += 1
 
     def _watch_motion(self, now: float, pose: tuple[float, float, float], v_commanded: float) -> None:
@@ -281,25 +299,77 @@ class CarProcess:
         sys.setswitchinterval(SWITCH_INTERVAL_S)
         log.info("car %d: NatNet %s at %s, link %s (version %d)", car.id, scenario.natnet.mode, scenario.natnet.server,
                  car.link, car.link_version)
-        with CommandSender.for_car(car, stamp_clock=self.clock) as sender, \
-                NatNetClient(self.natnet, on_frame=self._on_frame) as natnet_client, \
-                FleetBus(scenario.bus, scenario.fleet, car.id, listen=car.listen, clock=self.clock) as bus:
-            controller = threading.Thread(target=self._control_loop, args=(natnet_client, sender),
-                                          name=f"control-{car.id}", daemon=True)
-            controller.start()
+        with CommandSender.for_car(car, source=SOURCE_CAR_PROCESS, stamp_clock=self.clock) as sender:
+            controller = threading.Thread(target=self._control_loop, args=(sender,), name=f"control-{car.id}",
+                                          daemon=True)
+            controller.start()  # STOP to the car from now on, whatever else is not up yet
+            connector = threading.Thread(target=self._connect_natnet, name=f"natnet-connect-{car.id}", daemon=True)
+            connector.start()
+            bus = None
             try:
-                self._main_loop(bus, natnet_client)
+                bus = self._open_bus()
+                if bus is not None:
+                    self._main_loop(bus)
             finally:
                 self.stop.set()
                 controller.join(timeout=2.0)
                 sender.stop()  # STOP datagrams before the socket closes
+                connector.join(timeout=self.natnet.connect_timeout_s + 1.0)
                 self.state = "stopped"
-                self._publish_status(bus)
+                if bus is not None:
+                    self._publish_status(bus)
                 if stats_path is not None:
-                    self._write_stats(stats_path, natnet_client, bus, sender)
+                    write_stats(stats_path, self, bus, sender)
+                if self._natnet is not None:
+                    self._natnet.close()
+                if bus is not None:
+                    bus.close()
         return 0
 
-    def _main_loop(self, bus: FleetBus, natnet_client: NatNetClient) -> None:
+    def _connect_natnet(self) -> None:
+        """The connector thread: reach Motive (retrying) and hand the client over."""
+        while not self.stop.is_set():
+            client = NatNetClient(self.natnet, on_frame=self._on_frame)
+            try:
+                client.start()
+            except NatNetConnectionError as exc:
+                self._natnet_problem = str(exc)
+                self.stop.wait(self.scenario.control.retry_s)
+                continue
+            if self.stop.is_set():
+                client.close()
+                return
+            self._natnet = client
+            log.info("car %d: receiving NatNet %s from %s", self.car.id, client.version, self.scenario.natnet.server)
+            return
+
+    def _open_bus(self) -> FleetBus | None:
+        """The bus, once it opens (retrying every ``control.retry_s``); None if stopped first."""
+        while not self.stop.is_set():
+            bus = FleetBus(self.scenario.bus, self.scenario.fleet, self.car.id, listen=self.car.listen,
+                           clock=self.clock)
+            try:
+                bus.open()
+                return bus
+            except BusError as exc:
+                log.warning("car %d: waiting for the bus: %s; retrying in %.0f s", self.car.id,
+                            str(exc).splitlines()[0], self.scenario.control.retry_s)
+                bus.close()
+                self.stop.wait(self.scenario.control.retry_s)
+        return None
+
+    def waiting_for(self, now: float) -> tuple[str, ...]:
+        """What this car process is waiting for, in words (empty: nothing)."""
+        n = self.scenario.natnet
+        return waiting_for(
+            motive=None if self._natnet is not None else f"{n.server}:{n.command_port} ({self._natnet_problem})",
+            body=None if self._natnet is None or self._own_pose() is not None else self.car.body_id,
+            link=None if now - self._link_answered <= 3 * self.scenario.control.link_ping_period_s + 1.0
+            else self.car.link,
+            absent_peers=[c.id for c in self.scenario.cars if c.id != self.car.id and not self._alive.get(c.id)],
+            mode=self.operation.mode, hears_operator=self.operation.hears_operator(now))
+
+    def _main_loop(self, bus: FleetBus) -> None:
         control = self.scenario.control
         started_wait = self.clock()
         now = self.clock()
@@ -307,6 +377,7 @@ class CarProcess:
         next_trust = now + control.trust_report_period_s * (self.car.id % 7) / 7
         next_pose = now
         next_status = now
+        next_say = now + 1.0
         while not self.stop.is_set():
             now = self.clock()
             self._observe_frames()
@@ -317,9 +388,10 @@ class CarProcess:
                     log.warning("car %d: car %d left the bus", self.car.id, peer)
                     self.agent.peer_gone(peer)
                 self._alive[peer] = up
-            if not self.started and control.start_timeout_s and now - started_wait > control.start_timeout_s:
+            if (self.operation.mode == Mode.WAITING and self.operation.trial == 0 and control.start_timeout_s
+                    and now - started_wait > control.start_timeout_s):
                 log.warning("car %d: no start message for %.0f s; starting now", self.car.id, control.start_timeout_s)
-                self._start(messages.StartMessage(0, now, {self.car.id: (now, self.scenario.planner.cruise_speed_mps)}))
+                self._start(None)
             self.agent.gather_evidence(now)
             if now >= next_replan:
                 next_replan += control.replan_period_s
@@ -336,14 +408,25 @@ class CarProcess:
                 bus.publish("trust", messages.encode(self.agent.trust_message(now)))
             if now >= next_pose:
                 next_pose = max(next_pose + control.pose_period_s, now)
-                self._publish_pose(bus, natnet_client, now)
-            if now >= next_status:
+                self._publish_pose(bus, now)
+            state = self._state()
+            if now >= next_status or state != self.state:  # a new mode is told at once
+                self.state = state
                 next_status = max(next_status + control.status_period_s, now)
                 self._publish_status(bus)
+            if now >= next_say:
+                next_say = now + 1.0
+                self._waiting.say(self.state, self.waiting_for(now), now)
             bus.wait(0.005)  # wakes at once when a message arrives
 
+    def _state(self) -> str:
+        mode = self.operation.mode
+        if mode == Mode.DRIVING and self.stuck:
+            return "stuck"
+        return mode.value
+
     def _replan(self, now: float) -> None:
-        if not self.started:
+        if self.operation.mode != Mode.DRIVING:
             own = self.agent.tracks.get(self.car.id)
             motion = own.motion() if own else None
             if motion is not None:  # show where we stand until we may go
@@ -356,12 +439,13 @@ class CarProcess:
                 self.counters["replan_errors"] += 1
         own = self.agent.tracks.get(self.car.id)
         motion = own.motion() if own else None
-        if motion is not None and self.laps.advance(self.agent, tuple(motion.position), now):
+        if self.operation.mode == Mode.DRIVING and motion is not None \
+                and self.laps.advance(self.agent, tuple(motion.position), now):
             log.info("car %d: lap %d of %d", self.car.id, self.laps.lap, self.laps.laps)
-        if self.arrived:
-            self.state = "arrived"
-        elif self.started:
-            self.state = "stuck" if self.stuck else "driving"
+        if self.operation.mode == Mode.DRIVING and self.arrived:
+            with self._operation_lock:
+                self.operation.arrived()
+            log.info("car %d: %s", self.car.id, self.operation.reason)
         self._plan = self.agent.plan
 
     @property
@@ -378,8 +462,8 @@ class CarProcess:
         if outgoing is not None:
             bus.publish("plan", messages.encode(outgoing), repeat=repeat)
 
-    def _publish_pose(self, bus: FleetBus, natnet_client: NatNetClient, now: float) -> None:
-        pose = self._own_pose(natnet_client)
+    def _publish_pose(self, bus: FleetBus, now: float) -> None:
+        pose = self._own_pose()
         x, y, yaw = pose if pose is not None else (0.0, 0.0, 0.0)
         self._seq["pose"] += 1
         bus.publish("pose", messages.encode(messages.PoseMessage(
@@ -388,56 +472,14 @@ class CarProcess:
     def _publish_status(self, bus: FleetBus) -> None:
         self._seq["status"] += 1
         last = self.agent.last_result
-        counters = {k: v for k, v in (self.agent.counters | self.counters).items()}
-        counters |= {f"inbox_{k}": v for k, v in self.inbox.dropped.items()}
-        counters["commands_sent"] = self.control.sent
-        counters["stale_pose_stops"] = self.control.stale_pose_stops
-        counters["guard_limited"] = self.control.guard_limited
-        counters["lap"] = self.laps.lap
-        now = self.clock()
-        if self.agent.liar is not None:
-            counters |= {f"attack_{k}": v for k, v in self.agent.liar.counters.items()}
-        for peer, view in self.agent.peers.items():  # how fresh each peer's plan is, for resync checks
-            counters[f"plan_age_ms_{peer}"] = int(min(1e9, max(0.0, now - view.accepted_received) * 1e3))
-        counters |= clock_counters(self.agent.clock_offsets())
-        first = ("plan_age", "clock_")
         bus.publish("status", messages.encode(messages.StatusMessage(
             self.car.id, self._seq["status"], self.clock(), self.state,
             last.time_ms if last else 0.0, last.iterations if last else 0, self.arrived,
-            dict(sorted(counters.items(), key=lambda kv: not kv[0].startswith(first))[:64]))))
-
-    def _write_stats(self, path: Path, natnet_client: NatNetClient, bus: FleetBus,
-                     sender: CommandSender) -> None:
-        nat = natnet_client.stats()
-        stats = {
-            "car_id": self.car.id,
-            "state": self.state,
-            "at_goal": self.arrived,
-            "replan_ms": [round(x, 3) for x in self.agent.replan_ms],
-            "control": self.control.summary(),
-            "agent": dict(self.agent.counters),
-            "trust": dict(self.agent.trust.counters),
-            "clock_offsets_s": {str(peer): round(offset, 4) for peer, offset in self.agent.clock_offsets().items()},
-            "attack": dict(self.agent.liar.counters) if self.agent.liar is not None else None,
-            "inbox_dropped": dict(self.inbox.dropped),
-            "inbox_accepted": dict(self.inbox.accepted),
-            "bus": dict(bus.counters),
-            "natnet": {"received": nat.received, "decoded": nat.decoded, "dropped": nat.dropped,
-                       "rejected": dict(nat.rejected)},
-            "link_sent": sender.stats.sent,
-        }
-        path.write_text(json.dumps(stats, indent=1))
-
-
-def clock_counters(offsets: dict[int, float]) -> dict[str, int]:
-    """Peers' clock offsets as status counters (counts are >= 0): ``clock_ahead_ms_N`` or
-    ``clock_behind_ms_N``, milliseconds (dashboard.state reads them back)."""
-    return {f"clock_{'ahead' if offset >= 0 else 'behind'}_ms_{peer}": int(round(abs(offset) * 1e3))
-            for peer, offset in offsets.items()}
+            status_counters(self, self.clock()), self.operation.trial)))
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="trustfg car", description="Run one car: agent and bridge.")
+    parser = command_parser("trustfg car", __doc__.split("\n")[0])
     parser.add_argument("--id", type=int, required=True, help="this car's id (a [[cars]] entry of the config)")
     parser.add_argument("--config", required=True, help="fleet config: a TOML file or a shipped name (lab/fleet)")
     parser.add_argument("--stats", type=Path, default=None, help="write a JSON summary here at exit")

@@ -1,20 +1,49 @@
-"""What every trustfg process shares: signals that stop it, and its config or a clear exit.
+"""What every trustfg process shares: its parser, signals that stop it, and its config or
+a clear exit.
 
-A command's ``main(argv)`` parses its arguments, then builds what it runs inside
-:func:`configured`: a bad config file or value ends the command with one line naming the
-problem and exit status 2, never a traceback.
+A command's ``main(argv)`` parses its arguments with :func:`command_parser` (whose help
+shows every option's default), then builds what it runs inside :func:`configured`: a bad
+config file or value ends the command with one line naming the problem and exit status 2,
+never a traceback.
 """
 
 from __future__ import annotations
 
+import argparse
 import signal
 import sys
 import threading
 from typing import Callable, TypeVar
 
-from ..agent.config import ConfigError
-
 T = TypeVar("T")
+
+
+class _HelpWithDefaults(argparse.RawDescriptionHelpFormatter):
+    """Keeps the description's lines; appends ``(default: X)`` to every option that has a
+    default and does not name it already."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        default = action.default
+        if ("default" in text or action.required or default is None or default is False or default == argparse.SUPPRESS
+                or default == [] or isinstance(action, argparse._HelpAction)):
+            return text
+        return f"{text} (default: %(default)s)"
+
+
+class _OneLineErrors(argparse.ArgumentParser):
+    """A usage error is one line on stderr and exit status 2."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: {message} (see --help)\n")
+
+
+def command_parser(prog: str, doc: str | None, whole: bool = False, **kwargs) -> argparse.ArgumentParser:
+    """An argument parser for ``trustfg COMMAND``: the description is the first paragraph
+    of the command module's docstring (``whole``: all of it), never cut mid-sentence; the
+    help shows every default; a usage error is one line."""
+    description = (doc or "").strip() if whole else (doc or "").strip().split("\n\n")[0]
+    return _OneLineErrors(prog=prog, description=description, formatter_class=_HelpWithDefaults, **kwargs)
 
 
 def stop_on_signals(stop: threading.Event) -> threading.Event:
@@ -26,6 +55,8 @@ def stop_on_signals(stop: threading.Event) -> threading.Event:
 
 def configured(prog: str, build: Callable[[], T]) -> T:
     """``build()``; on a :class:`ConfigError` print ``prog: error`` and exit with status 2."""
+    from ..agent.config import ConfigError  # here: trustfg stop parses its arguments before the config loads
+
     try:
         return build()
     except ConfigError as exc:

@@ -1,6 +1,6 @@
 """The paper's experiments, each run with its factor on and off over many seeds.
 
-    trustfg experiment {proximity,consistency,transparency,lab,all} [--seed N] [--seeds K]
+    trustfg experiment {proximity,consistency,transparency,lab,pipeline,all} [--seed N] [--seeds K]
                        [--out DIR] [--jobs J]
     trustfg experiment adversaries ...         (fleet.adversaries: every attack, three fleets)
     trustfg experiment transparency-sweep ...  (fleet.sweep: misinformation x g_max)
@@ -39,9 +39,9 @@ from ..agent import metrics
 from ..agent.config import PAPER_LIAR, AttackConfig, Scenario
 from ..agent.scenario_files import load_scenario
 from ..agent.world import build_sdf
-from .command import configured
+from .command import command_parser, configured
 from .fleet_sim import simulate
-from .runs import RunRecord, motion_summary, rounded
+from .runs import RunRecord, motion_summary, plan_outcomes, rounded
 from .trust_record import TRUST_GAP, TRUST_SETTLE_S
 
 log = logging.getLogger(__name__)
@@ -103,6 +103,22 @@ def uniform_wide(scenario: Scenario) -> Scenario:
         off.trust, epsilon_gain_fixed=scenario.trust.epsilon_gain_max))
 
 
+def no_avoidance(scenario: Scenario) -> Scenario:
+    """The paper's "off": no trust factor, and nothing else that keeps cars apart either
+    (plan verification and the proximity guard switched off too)."""
+    return dataclasses.replace(factors(scenario, **ALL_OFF),
+                               verify=dataclasses.replace(scenario.verify, enabled=False),
+                               guard=dataclasses.replace(scenario.guard, enabled=False))
+
+
+def mechanisms(scenario: Scenario, verify: bool = True, guard: bool = True, deadlock: bool = True) -> Scenario:
+    """Every trust factor on, and the pipeline's mechanisms switched as given."""
+    return dataclasses.replace(factors(scenario, **ALL_ON),
+                               verify=dataclasses.replace(scenario.verify, enabled=verify),
+                               guard=dataclasses.replace(scenario.guard, enabled=guard),
+                               deadlock=dataclasses.replace(scenario.deadlock, enabled=deadlock))
+
+
 @dataclass(frozen=True)
 class Experiment:
     name: str
@@ -114,10 +130,9 @@ class Experiment:
 EXPERIMENTS = {
     "proximity": Experiment(
         "proximity", "intersection",
-        {"on": functools.partial(factors, **ALL_ON), "fixed": no_trust,
-         "off": functools.partial(factors, **ALL_OFF)},
+        {"on": functools.partial(factors, **ALL_ON), "fixed": no_trust, "off": no_avoidance},
         "Do the trust factors prevent proximity breaches on conflicting routes? (fixed: no trust factors, "
-        "eps_0 from every peer; off: no avoidance)"),
+        "eps_0 from every peer; off: no avoidance, no verification, no guard)"),
     "consistency": Experiment(
         "consistency", "intersection",
         {"on": functools.partial(factors, **ALL_ON),
@@ -132,7 +147,18 @@ EXPERIMENTS = {
         {"A": functools.partial(factors, **ALL_ON),
          "on": lambda s: trust_on(with_liar(s)), "off": lambda s: trust_off(with_liar(s))},
         "The paper's lab left turns: A all honest, B car 1 at 40 % misinformation."),
+    "pipeline": Experiment(
+        "pipeline", "intersection-8",
+        {"on": functools.partial(mechanisms),
+         "no_verify": functools.partial(mechanisms, verify=False),
+         "no_guard": functools.partial(mechanisms, guard=False),
+         "no_deadlock": functools.partial(mechanisms, deadlock=False),
+         "planner_only": functools.partial(mechanisms, verify=False, guard=False, deadlock=False)},
+        "What does each safety mechanism under the planner add (plan verification with its "
+        "fallback, the proximity guard, deadlock resolution)?"),
 }
+PAPER = ("proximity", "consistency", "transparency", "lab")
+"""What ``trustfg experiment all`` runs: the paper's experiments."""
 
 
 # --- one run ---------------------------------------------------------------------------------
@@ -154,7 +180,7 @@ def summarise(scenario: Scenario, record: RunRecord) -> dict:
         "trust": rounded(record.trust[-1]),
         "replan_ms_median": round(float(np.median(np.concatenate(record.replan_ms))), 2)
         if any(record.replan_ms) else None,
-    }
+    } | plan_outcomes(record.counters)
     liars = [record.car_ids.index(i) for i in run.get("liar_ids", [])]
     honest = [i for i in range(len(record.car_ids)) if i not in liars]
     after = record.trust_times >= TRUST_SETTLE_S
@@ -257,6 +283,11 @@ def summary(name: str, results: dict[str, list[dict]]) -> dict:
             "inconsistency_mean": round(float(np.mean([r["inconsistency"] for r in runs])), 4),
             "inconsistency_median": round(float(np.median([r["inconsistency"] for r in runs])), 4),
             "replan_ms_median": _median([r["replan_ms_median"] for r in runs if r["replan_ms_median"] is not None]),
+            "success": sum(1 for r in runs if all(r["reached_goal"]) and not r["breaches"]),
+            "plans_fallback_share": _share(runs, "fallback"),
+            "plans_retry_share": _share(runs, "retry"),
+            "deadlocks": sum(r.get("deadlocks", 0) for r in runs),
+            "runs_with_deadlock": sum(1 for r in runs if r.get("deadlocks", 0)),
         }
         if runs and "liar_min_distance" in runs[0]:
             liar = [d for r in runs for d in r["liar_min_distance"]]
@@ -278,6 +309,12 @@ def summary(name: str, results: dict[str, list[dict]]) -> dict:
     return out
 
 
+def _share(runs: list[dict], outcome: str) -> float | None:
+    """The share of all replans of these runs that ended in ``outcome``."""
+    total = sum(sum(r["plans"].values()) for r in runs if "plans" in r)
+    return round(sum(r["plans"][outcome] for r in runs if "plans" in r) / total, 4) if total else None
+
+
 def _median(values: list[float]) -> float | None:
     return round(float(np.median(values)), 3) if values else None
 
@@ -289,7 +326,8 @@ def print_table(report: dict, stream=sys.stdout) -> None:
     name, s = report["experiment"], report["summary"]
     print(f"\n== {name} ({report['scenario']}, {len(report['seeds'])} seeds): {report['question']}", file=stream)
     cols = ["runs", "seeds_with_breach", "min_clearance_m", "obstacle_min_clearance_m", "all_reached_goal",
-            "makespan_median_s", "inconsistency_mean", "replan_ms_median"]
+            "success", "makespan_median_s", "inconsistency_mean", "replan_ms_median", "plans_retry_share",
+            "plans_fallback_share", "deadlocks", "runs_with_deadlock"]
     extra = ["liar_min_distance_median_m", "honest_trust_min_after_settle", "trust_gap_min_after_settle",
              "trust_separated_at_s_max"]
     variants = [v for v in report["variants"]]
@@ -372,8 +410,8 @@ def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv and argv[0] in STUDIES:
         return importlib.import_module(f".{STUDIES[argv[0]]}", __package__).main(argv[1:])
-    parser = argparse.ArgumentParser(prog="trustfg experiment", description=__doc__.split("\n")[0],
-                                     epilog=f"also: {', '.join(STUDIES)} (each with its own --help)")
+    parser = command_parser("trustfg experiment", __doc__,
+                            epilog=f"also: {', '.join(STUDIES)} (each with its own --help)")
     parser.add_argument("name", choices=[*EXPERIMENTS, "all", *STUDIES])
     parser.add_argument("--seed", type=int, default=0, help="first seed (default 0)")
     parser.add_argument("--seeds", type=int, default=20, help="number of seeds (default 20)")
@@ -389,7 +427,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.seeds < 1:
         parser.error("--seeds must be at least 1")
     out = args.out or Path("runs") / time.strftime("experiment-%Y%m%d-%H%M%S")
-    names = list(EXPERIMENTS) if args.name == "all" else [args.name]
+    names = list(PAPER) if args.name == "all" else [args.name]
     seeds = list(range(args.seed, args.seed + args.seeds))
     if args.scenario:
         configured("trustfg experiment", lambda: load_scenario(args.scenario))

@@ -10,7 +10,9 @@ Cases (t = seconds after the start; car 2 is the victim where one car suffers):
     delay-50ms     every Zenoh link through a relay holding each chunk 50 +- 20 ms
     partition      car 2 cut off from the other cars for t = 4..7 s, then healed
     kill-restart   car 2's process SIGKILLed (once it drives, from t = 4 s), started again
-                   2 s later
+                   2 s later; the fleet is configured to let a restarted car rejoin the
+                   running trial (operator.rejoin_trial; by default it would wait for the
+                   operator's next start)
     mocap-drop-30  30 % of NatNet frames dropped (mocap-sim)
     occlusion      car 2's rigid body untracked for 1 s (once it drives, from t = 4 s)
     link-cut       car 2's command datagrams dropped from then to the end (nftables)
@@ -38,7 +40,6 @@ Measured per run, from mocap-sim's ground truth and the recorded messages:
 
 from __future__ import annotations
 
-import argparse
 import csv
 import dataclasses
 import json
@@ -55,6 +56,7 @@ import numpy as np
 
 from ..agent.scenario_files import load_scenario
 from . import netem
+from .command import command_parser
 from .launch import START_LEAD_S, RunContext, free_port, loopback_fleet, run
 
 SCENARIO = "intersection"
@@ -129,6 +131,11 @@ def _kill(setup: Setup, context: RunContext) -> None:
     context.note(f"fault: SIGKILL car {VICTIM}")
 
 
+def _rejoin(setup: Setup) -> None:
+    """A restarted car process may rejoin the running trial (by default it waits)."""
+    setup.fleet = dataclasses.replace(setup.fleet, operator=dataclasses.replace(setup.fleet.operator, rejoin_trial=True))
+
+
 def _restart(setup: Setup, context: RunContext) -> float | None:
     if setup.killed_at is None or time.time() < setup.killed_at + 2.0:
         return 0.1  # two seconds after the kill
@@ -149,7 +156,7 @@ CASES = {case.name: case for case in [
     Case("partition", schedule=[(4.0, lambda s, c: (c.note(f"fault: partition car {VICTIM}"), s.lab.partition(VICTIM))),
                                 (7.0, lambda s, c: (c.note(f"heal: car {VICTIM} rejoins"), s.lab.clear(VICTIM)))],
          measures_recovery=True),
-    Case("kill-restart", schedule=[(4.0, when_moving(_kill)), (6.0, _restart)], measures_stop=True,
+    Case("kill-restart", prepare=_rejoin, schedule=[(4.0, when_moving(_kill)), (6.0, _restart)], measures_stop=True,
          measures_recovery=True),
     Case("mocap-drop-30", prepare=lambda s: s.mocap_args.append("--drop-rate=0.3")),
     Case("occlusion", schedule=[(4.0, when_moving(lambda s, c: (
@@ -294,10 +301,9 @@ def _interrupt(signum, frame) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="trustfg faults", description=__doc__.split("\n")[0],
-                                     epilog="Needs root: network namespaces and nftables.")
+    parser = command_parser("trustfg faults", __doc__, epilog="Needs root: network namespaces and nftables.")
     parser.add_argument("--seeds", type=int, default=3, help="runs per case (seeds 0..K-1)")
-    parser.add_argument("--cases", nargs="+", choices=list(CASES), default=list(CASES))
+    parser.add_argument("--cases", nargs="+", choices=list(CASES), default=list(CASES), help="the cases to run")
     parser.add_argument("--out", type=Path, default=None, help="folder for the runs (default runs/faults-<time>)")
     args = parser.parse_args(argv)
     reason = netem.available()

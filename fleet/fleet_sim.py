@@ -29,7 +29,7 @@ from ..agent.config import Scenario, SimConfig
 from ..agent.vehicle import VehicleState
 from ..agent.vehicle import step as vehicle_step
 from ..agent.world import SignedDistanceField, build_sdf
-from ..bridge.tracking import track
+from ..bridge.drive import drive
 from .runs import RunRecord
 
 RECORD_TRUST_PERIOD_S = 0.1
@@ -76,6 +76,7 @@ def simulate(scenario: Scenario, seed: int, sdf: SignedDistanceField | None = No
     times, states = [], []
     trust_times, trust_rows, transparency_rows, epsilon_rows = [], [], [], []
     arrived: list[float | None] = [None] * n
+    guard_limited = [0] * n
     plan_log: list = []
     next_replan = phase.copy()
     next_report = rng.uniform(0.0, control.trust_report_period_s, n)
@@ -90,10 +91,12 @@ def simulate(scenario: Scenario, seed: int, sdf: SignedDistanceField | None = No
             if message is not None:
                 agents[receiver].receive(message, own[receiver])
         # 2. Everyone sees everyone (mocap), with noise.
+        seen = np.empty((n, n, 3))  # seen[j, i]: car i as car j sees it
         for i, state in enumerate(vehicles):
             noisy = noise_rng.normal(0.0, sim.observation_noise_m, (n, 2))
+            seen[:, i] = np.column_stack([state.x + noisy[:, 0], state.y + noisy[:, 1], np.full(n, state.yaw)])
             for j, agent in enumerate(agents):
-                agent.observe(own[j], ids[i], state.x + noisy[j, 0], state.y + noisy[j, 1], state.yaw)
+                agent.observe(own[j], ids[i], *seen[j, i])
         # 3. Evidence, replanning, reports.
         for i, agent in enumerate(agents):
             agent.gather_evidence(own[i])
@@ -122,13 +125,12 @@ def simulate(scenario: Scenario, seed: int, sdf: SignedDistanceField | None = No
             state = vehicles[i]
             if arrived[i] is None and math.hypot(state.x - cars[i].goal[0], state.y - cars[i].goal[1]) <= scenario.arrival_radius_m:
                 arrived[i] = t
-            if own[i] < depart[i] or agent.plan is None or agent.at_goal:
-                v_cmd, w_cmd = 0.0, 0.0
-            else:
-                seen = agent.tracks[ids[i]].motion()
-                v_cmd, w_cmd = track(agent.plan, own[i], seen.position[0], seen.position[1], seen.yaw,
-                                     scenario.tracking, scenario.vehicle)
-            vehicles[i] = vehicle_step(state, v_cmd, w_cmd, step_s, scenario.vehicle)
+            me = agent.tracks[ids[i]].motion()
+            others = [(*seen[i, j], cars[j].radius_m) for j in range(n) if j != i]
+            command = drive(agent.plan, own[i], (me.position[0], me.position[1], me.yaw),
+                            own[i] >= depart[i] and not agent.at_goal, lambda: others, cars[i].radius_m, scenario, sdf)
+            guard_limited[i] += command.guard_limited
+            vehicles[i] = vehicle_step(state, command.v, command.omega, step_s, scenario.vehicle)
         if all(a is not None for a in arrived) and all(abs(s.v) < 1e-3 for s in vehicles):
             break
 
@@ -147,7 +149,7 @@ def simulate(scenario: Scenario, seed: int, sdf: SignedDistanceField | None = No
         replan_ms=[list(a.replan_ms) for a in agents],
         counters=[dict(a.counters) | {f"trust_{k}": v for k, v in a.trust.counters.items()}
                   | ({f"attack_{k}": v for k, v in a.liar.counters.items()} if a.liar else {})
-                  | network.counters(i) for i, a in enumerate(agents)],
+                  | {"guard_limited": guard_limited[i]} | network.counters(i) for i, a in enumerate(agents)],
         inbox=[dict(box.dropped) | {f"accepted_{k}": v for k, v in box.accepted.items()} for box in inboxes],
         final_plans=[(a.plan.positions.copy(), a.plan.velocities.copy()) if a.plan is not None else
                      (np.zeros((0, 2)), np.zeros((0, 2))) for a in agents],

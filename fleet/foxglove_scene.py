@@ -130,7 +130,7 @@ class FoxgloveLog:
             drawn(sender, at, data)
 
     def topic(self, kind: str, sender: int) -> str:
-        if kind in (keys.START, keys.TRUTH):
+        if kind in (*keys.OPERATOR, keys.TRUTH):
             return keys.fleet_key(self.fleet, kind)
         return keys.key(self.fleet, sender, kind)
 

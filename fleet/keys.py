@@ -10,8 +10,15 @@ Keys (F the fleet, N the car id):
     trustfg/F/N/pose     Pose         best effort, express
     trustfg/F/N/status   Status       best effort
     trustfg/F/N/alive    liveliness token of car N's process
-    trustfg/F/start      Start        the operator's go (cached, late joiners get it)
+    trustfg/F/N/clock    car N's queryable: answers a Clock message (its clock), for
+                         the operator's clock check (trustfg check)
+    trustfg/F/start      Start        the operator's go for a trial (cached, late joiners
+                                      get it; a car takes it only before its departure)
+    trustfg/F/stop       Stop         the operator's e-stop, release or abort (cached)
+    trustfg/F/heartbeat  Heartbeat    an operator's session is alive (the deadman)
     trustfg/F/truth      mocap-sim's ground truth, in recordings only (never on the bus)
+
+Only the operator may put start, stop and heartbeat (fleet.security).
 
 Advanced publishers and subscribers (plans, the start) add Zenoh's own machinery under ``<key>/@adv/...``;
 access control (fleet.security) must allow it next to the keys themselves.
@@ -23,7 +30,12 @@ ROOT = "trustfg"
 KINDS = ("plan", "trust", "pose", "status")
 """What a car publishes under its own keys."""
 ALIVE = "alive"
+CLOCK = "clock"
 START = "start"
+STOP = "stop"
+HEARTBEAT = "heartbeat"
+OPERATOR = (START, STOP, HEARTBEAT)
+"""The operator's keys: trustfg/F/KIND, put by the operator only."""
 TRUTH = "truth"
 
 
@@ -58,11 +70,12 @@ def fleet_key_tree(fleet: str, name: str) -> list[str]:
 
 
 def parse_key(fleet: str, key_expr: str) -> tuple[int, str] | None:
-    """``trustfg/F/N/kind`` -> (N, kind); ``trustfg/F/start`` -> (0, "start"); else None."""
+    """``trustfg/F/N/kind`` -> (N, kind); ``trustfg/F/start`` (or another of the operator's
+    keys) -> (0, "start"); else None."""
     parts = key_expr.split("/")
-    if len(parts) == 3 and parts[:2] == [ROOT, fleet] and parts[2] == START:
-        return 0, START
-    if len(parts) != 4 or parts[:2] != [ROOT, fleet] or parts[3] not in (*KINDS, ALIVE):
+    if len(parts) == 3 and parts[:2] == [ROOT, fleet] and parts[2] in OPERATOR:
+        return 0, parts[2]
+    if len(parts) != 4 or parts[:2] != [ROOT, fleet] or parts[3] not in (*KINDS, ALIVE, CLOCK):
         return None
     if not parts[2].isdigit() or not 1 <= int(parts[2]) <= 255 or parts[2] != str(int(parts[2])):
         return None

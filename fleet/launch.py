@@ -24,14 +24,9 @@ Exit status: 0 when every car arrived with no breach and no process crashed; 1 o
 
 from __future__ import annotations
 
-import argparse
-import contextlib
 import dataclasses
 import json
 import logging
-import os
-import select
-import signal
 import socket
 import subprocess
 import sys
@@ -43,7 +38,6 @@ from typing import Callable
 
 import numpy as np
 
-from ..agent import messages
 from ..agent.config import (
     ATTACKS,
     PAPER_LIAR,
@@ -57,18 +51,17 @@ from ..agent.config import (
 from ..agent.scenario_files import dump_scenario, load_scenario
 from ..bridge import natnet
 from .bus import FleetBus
-from .command import configured, stop_on_signals
-from .cpu import CpuMeter
+from .command import command_parser, configured, stop_on_signals
 from .fleet_sim import draw_departures
 from .laps import final_legs
 from .link_keys import with_link_keys
+from .operator import OperatorSession
+from .processes import READY_TIMEOUT_S, Processes, wait_ready
 from .recording import convert_run
 from .sim_summary import Recorder, print_summary, summarise
 
 log = logging.getLogger(__name__)
 
-READY_TIMEOUT_S = 30.0
-GRACE_S = 5.0
 START_LEAD_S = 1.0
 
 
@@ -118,61 +111,13 @@ def loopback_fleet(scenario: Scenario, cars: int | None, liar: int | list[int] |
     return fleet
 
 
-class Processes:
-    """Child processes, each in its own session; stopped for sure on exit."""
-
-    def __init__(self, wrap: Callable[[str, list[str]], list[str]] | None = None) -> None:
-        self.children: dict[str, subprocess.Popen] = {}
-        self.killed: set[str] = set()
-        self.wrap = wrap or (lambda name, argv: argv)
-        self.cpu = CpuMeter()
-        self.cpu.watch("launcher", os.getpid())
-
-    def start(self, name: str, args: list[str], log_path: Path, stdout=None) -> subprocess.Popen:
-        log_file = open(log_path, "a")
-        argv = self.wrap(name, [sys.executable, "-m", "trustfg", *args])
-        process = subprocess.Popen(argv, stdout=stdout or log_file, stderr=log_file, start_new_session=True, text=True)
-        log_file.close()
-        self.children[name] = process
-        self.cpu.watch(name, process.pid)
-        return process
-
-    def stop(self, names: list[str] | None = None) -> None:
-        names = list(self.children) if names is None else names
-        for name in names:
-            process = self.children[name]
-            if process.poll() is None:
-                try:
-                    os.killpg(process.pid, signal.SIGTERM)
-                except ProcessLookupError:
-                    pass
-        deadline = time.monotonic() + GRACE_S
-        for name in names:
-            process = self.children[name]
-            try:
-                process.wait(timeout=max(0.1, deadline - time.monotonic()))
-            except subprocess.TimeoutExpired:
-                log.warning("%s did not stop within %.0f s; killing it", name, GRACE_S)
-                try:
-                    os.killpg(process.pid, signal.SIGKILL)
-                except ProcessLookupError:
-                    pass
-                process.wait(timeout=5)
-            if process.stdout:
-                process.stdout.close()
-
-    def kill(self, name: str) -> None:
-        """SIGKILL a child (a fault to inject): it is not counted as crashed."""
-        self.killed.add(name)
-        process = self.children[name]
-        with contextlib.suppress(ProcessLookupError):
-            os.killpg(process.pid, signal.SIGKILL)
-        process.wait(timeout=5)
-
-    def crashed(self) -> list[str]:
-        """Children that exited on their own with an error (before we stopped them)."""
-        return [name for name, p in self.children.items()
-                if p.poll() not in (None, 0) and not (name in self.killed and p.returncode == -signal.SIGKILL)]
+def with_deadman(scenario: Scenario, deadman_s: float | None) -> Scenario:
+    """The scenario with ``operator.deadman_s`` set (None: as it is)."""
+    if deadman_s is None:
+        return scenario
+    operator = dataclasses.replace(scenario.operator, deadman_s=deadman_s)
+    operator.validate("operator")
+    return dataclasses.replace(scenario, operator=operator)
 
 
 def departures(scenario: Scenario, seed: int, t_go: float) -> dict[int, tuple[float, float]]:
@@ -213,12 +158,14 @@ class RunContext:
 def run(scenario: Scenario, out: Path, seed: int = 0, timeout_s: float | None = None,
         natnet_version: str = natnet.DEFAULT_STREAM_VERSION, mocap_args: tuple[str, ...] = (), stop: threading.Event | None = None,
         dashboard_port: int | None = None, wrap: Callable[[str, list[str]], list[str]] | None = None,
-        schedule: list[tuple[float, Callable[[RunContext], None]]] = (), infra_ip: str = "127.0.0.1") -> dict:
+        schedule: list[tuple[float, Callable[[RunContext], None]]] = (), infra_ip: str = "127.0.0.1",
+        stay: bool = False) -> dict:
     """Run the fleet to completion; returns the summary (also written to out/summary.json).
 
     ``dashboard_port``: also start ``trustfg dashboard`` there (0: any free port).
     ``wrap(name, argv)``: how to start each child (e.g. inside a network namespace).
-    ``schedule``: (seconds after the go, action) -- faults injected during the run."""
+    ``schedule``: (seconds after the go, action) -- faults injected during the run.
+    ``stay``: run until the timeout even when every car has arrived (further trials)."""
     stop = stop or threading.Event()
     out.mkdir(parents=True, exist_ok=True)
     scenario = with_link_keys(scenario, out / "keys")
@@ -238,7 +185,7 @@ def run(scenario: Scenario, out: Path, seed: int = 0, timeout_s: float | None = 
                                               "--command-log", str(out / "commands.csv"),
                                               "--seed", str(seed), *mocap_args],
                                 out / "mocap_sim.log", stdout=subprocess.PIPE)
-        _wait_ready(mocap, stop)
+        wait_ready(mocap, stop)
         if dashboard_port is not None:
             port = dashboard_port or free_port()
             processes.start("dashboard", ["dashboard", "--config", str(config_path), "--port", str(port),
@@ -247,21 +194,23 @@ def run(scenario: Scenario, out: Path, seed: int = 0, timeout_s: float | None = 
         for car in scenario.cars:
             processes.start(f"car {car.id}", RunContext(scenario, out, processes, config_path, 0.0).car_args(car.id),
                             out / f"car_{car.id}.log")
-        with FleetBus(scenario.bus, scenario.fleet, None, listen=(observer_endpoint,)) as bus:
+        with FleetBus(scenario.bus, scenario.fleet, None, listen=(observer_endpoint,),
+                      operator_kinds=("start", "stop")) as bus:
             recorder = Recorder(bus, out / "messages.jsonl")
+            operator = OperatorSession(scenario, bus, direct=False)  # the heartbeat, the start
             try:
                 ids = [c.id for c in scenario.cars]
                 print(f"trustfg sim: {len(ids)} cars, waiting for them to come up ...", flush=True)
                 deadline = time.monotonic() + READY_TIMEOUT_S + 5 * len(ids)
                 while not stop.is_set() and not all(bus.alive.get(i) and i in recorder.status for i in ids):
                     recorder.poll()
+                    operator.step()
                     if processes.crashed() or time.monotonic() > deadline:
                         missing = [i for i in ids if not (bus.alive.get(i) and i in recorder.status)]
                         raise RuntimeError(f"cars {missing} did not come up (crashed: {processes.crashed()})")
                     time.sleep(0.05)
                 t_go = time.time() + START_LEAD_S
-                start = messages.StartMessage(1, time.time(), departures(scenario, seed, t_go))
-                bus.publish("start", messages.encode(start))
+                operator.start(departures(scenario, seed, t_go), trial=1)
                 processes.cpu.sample(mark="go")
                 context = RunContext(scenario, out, processes, config_path, t_go, recorder)
                 print(f"trustfg sim: go (seed {seed}); recording to {out}", flush=True)
@@ -269,6 +218,7 @@ def run(scenario: Scenario, out: Path, seed: int = 0, timeout_s: float | None = 
                 next_report = time.monotonic() + 5.0
                 while not stop.is_set() and time.monotonic() < end:
                     recorder.poll()
+                    operator.step()
                     while pending and time.time() >= t_go + pending[0][0]:
                         t_action, action = pending.pop(0)
                         again = action(context)  # a number: not yet, ask again that much later
@@ -278,7 +228,7 @@ def run(scenario: Scenario, out: Path, seed: int = 0, timeout_s: float | None = 
                     arrived = [i for i in ids if recorder.status.get(i) and recorder.status[i].at_goal]
                     if arrived and "first_arrival" not in processes.cpu.marks:
                         processes.cpu.sample(mark="first_arrival")
-                    if len(arrived) == len(ids) and not pending:
+                    if len(arrived) == len(ids) and not pending and not stay:
                         break
                     if time.monotonic() > next_report:
                         next_report += 5.0
@@ -305,19 +255,6 @@ def run(scenario: Scenario, out: Path, seed: int = 0, timeout_s: float | None = 
     return summary
 
 
-def _wait_ready(process: subprocess.Popen, stop: threading.Event) -> None:
-    deadline = time.monotonic() + READY_TIMEOUT_S
-    while not stop.is_set() and time.monotonic() < deadline:
-        readable, _, _ = select.select([process.stdout], [], [], 0.2)
-        if readable:
-            line = process.stdout.readline()
-            if line.strip() == "READY":
-                return
-            if not line and process.poll() is not None:
-                raise RuntimeError(f"mocap-sim exited with {process.returncode} before it was ready")
-        elif process.poll() is not None:
-            raise RuntimeError(f"mocap-sim exited with {process.returncode} before it was ready")
-    raise RuntimeError("mocap-sim did not become ready")
 
 
 def _port_free(port: int) -> bool:
@@ -330,7 +267,7 @@ def _port_free(port: int) -> bool:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="trustfg sim", description=__doc__.split("\n")[0])
+    parser = command_parser("trustfg sim", __doc__)
     parser.add_argument("--scenario", default=None,
                         help="a scenario file, or a shipped scene's name (default: intersection, or "
                              "intersection-8 for more than 4 cars)")
@@ -354,6 +291,11 @@ def main(argv: list[str] | None = None) -> int:
                         help="NatNet version mocap-sim streams (default %(default)s)")
     parser.add_argument("--no-dashboard", action="store_true", help="do not start the dashboard")
     parser.add_argument("--dashboard-port", type=int, default=8765, help="dashboard port (0: any free one)")
+    parser.add_argument("--stay", action="store_true",
+                        help="keep the fleet up after the cars arrive, until --timeout or Ctrl-C (more trials: "
+                             "trustfg go, trustfg stop)")
+    parser.add_argument("--deadman", type=float, default=None,
+                        help="cars stop when the launcher's heartbeat is missing this long, s (default: off)")
     parser.add_argument("--mocap", action="append", default=[], metavar="ARG",
                         help="extra argument for mocap-sim, e.g. --mocap=--drop-rate=0.3 (repeatable)")
     args = parser.parse_args(argv)
@@ -363,17 +305,18 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("--misinformation must be within [0, 1]")
     if args.laps is not None and args.laps < 1:
         parser.error("--laps must be at least 1")
-    fleet = configured("trustfg sim", lambda: loopback_fleet(
+    fleet = configured("trustfg sim", lambda: with_deadman(loopback_fleet(
         load_scenario(args.scenario or default_scenario(args.cars)), args.cars, args.liar, args.misinformation,
         attack=parse_attack(args.attack, args.attack_param),
-        clock_offsets=parse_id_values(args.clock_offset, "--clock-offset")))
+        clock_offsets=parse_id_values(args.clock_offset, "--clock-offset")), args.deadman))
     if args.laps is not None:
         fleet = dataclasses.replace(fleet, control=dataclasses.replace(fleet.control, laps=args.laps))
     out = args.out or Path("runs") / time.strftime("sim-%Y%m%d-%H%M%S")
     stop = stop_on_signals(threading.Event())
     try:
         port = None if args.no_dashboard else (args.dashboard_port if _port_free(args.dashboard_port) else 0)
-        summary = run(fleet, out, args.seed, args.timeout, args.natnet_version, tuple(args.mocap), stop, port)
+        summary = run(fleet, out, args.seed, args.timeout, args.natnet_version, tuple(args.mocap), stop, port,
+                      stay=args.stay)
     except RuntimeError as exc:
         print(f"trustfg sim: {exc} (logs in {out})", file=sys.stderr)
         return 1

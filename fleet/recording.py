@@ -14,7 +14,6 @@ car's x, y, yaw, v, omega at 50 Hz), and the fleet config that ran as metadata
 
 from __future__ import annotations
 
-import argparse
 import csv
 import json
 import threading
@@ -28,7 +27,7 @@ from ..agent import messages
 from ..agent.config import Scenario
 from ..agent.scenario_files import dump_scenario, load_scenario, scenario_from_dict
 from .bus import FleetBus
-from .command import configured, stop_on_signals
+from .command import command_parser, configured, stop_on_signals
 from .foxglove_scene import FoxgloveLog
 
 NUMBER = {"type": "number"}
@@ -43,9 +42,13 @@ SCHEMAS = {
         "tau": {"type": "array", "items": NUMBER}, "trust": NUMBER, "epsilon": NUMBER}}}},
     "pose": {"x": NUMBER, "y": NUMBER, "yaw": NUMBER, "valid": {"type": "boolean"}},
     "status": {"state": {"type": "string"}, "replan_ms": NUMBER, "iterations": INTEGER,
-               "at_goal": {"type": "boolean"}, "counters": {"type": "object", "additionalProperties": INTEGER}},
-    "start": {"cars": {"type": "object", "additionalProperties": {"type": "object", "properties": {
+               "at_goal": {"type": "boolean"}, "counters": {"type": "object", "additionalProperties": INTEGER},
+               "trial": INTEGER},
+    "start": {"trial": INTEGER, "cars": {"type": "object", "additionalProperties": {"type": "object", "properties": {
         "depart": NUMBER, "cruise": NUMBER}}}},
+    "stop": {"action": {"type": "string"}, "cars": {"type": "array", "items": INTEGER}, "trial": INTEGER},
+    "heartbeat": {},
+    "clock": {},
     "truth": {"t": NUMBER, "cars": {"type": "object", "additionalProperties": {"type": "object", "properties": {
         "x": NUMBER, "y": NUMBER, "yaw": NUMBER, "v": NUMBER, "omega": NUMBER}}}},
 }
@@ -150,7 +153,7 @@ def resolve_run(run: Path) -> Path:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="trustfg record", description="Record a live fleet to an MCAP file.")
+    parser = command_parser("trustfg record", "Record a live fleet to an MCAP file.")
     parser.add_argument("--config", required=True, help="fleet config: a TOML file or a shipped name (lab/fleet)")
     parser.add_argument("--out", type=Path, required=True, help="MCAP file to write")
     parser.add_argument("--listen", action="append", default=[], help="Zenoh endpoint to listen on (repeatable)")
@@ -160,7 +163,8 @@ def main(argv: list[str] | None = None) -> int:
     inbox = messages.Inbox()
     recorder = McapRecorder(args.out, scenario)
     try:
-        with FleetBus(scenario.bus, scenario.fleet, None, listen=tuple(args.listen)) as bus:
+        with FleetBus(scenario.bus, scenario.fleet, None, listen=tuple(args.listen),
+                      operator_kinds=("start", "stop")) as bus:
             print(f"recording fleet {scenario.fleet!r} to {args.out} (Ctrl-C to stop)", flush=True)
             while True:
                 done = stop.is_set()  # one more drain after the stop, so nothing received is lost

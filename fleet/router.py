@@ -13,7 +13,6 @@ only forwards, so it can be restarted (the advanced subscribers recover the late
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 import logging
@@ -24,7 +23,7 @@ from importlib import resources
 import zenoh
 
 from ..agent.config import Scenario
-from .command import stop_on_signals
+from .command import command_parser, stop_on_signals
 
 log = logging.getLogger(__name__)
 
@@ -54,7 +53,7 @@ def through_router(scenario: Scenario, endpoint: str) -> Scenario:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="trustfg router", description=__doc__.split("\n")[0])
+    parser = command_parser("trustfg router", __doc__)
     parser.add_argument("--config", default=shipped_config(), help="Zenoh router config (default: the shipped %s)" % SHIPPED)
     parser.add_argument("--listen", action="append", default=[], metavar="ENDPOINT",
                         help="listen here instead of the config's endpoints, e.g. tcp/0.0.0.0:7447 (repeatable)")

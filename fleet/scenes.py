@@ -29,7 +29,6 @@ from its longest route, so a stuck run ends soon.
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import math
 import sys
@@ -41,7 +40,7 @@ import numpy as np
 from ..agent.config import CarConfig, ConfigError, Obstacle, SafetyConfig, Scenario, SimConfig, WorldConfig
 from ..agent.scenario_files import dump_scenario, load_scenario
 from ..agent.world import SignedDistanceField, build_sdf
-from .command import configured
+from .command import command_parser, configured
 from .routes import COMFORT_MARGIN_M, NoRoute, car_route, path_length
 
 RADIUS_M = CarConfig(id=1, start=(0, 0), goal=(0, 0)).radius_m
@@ -325,7 +324,7 @@ def _rotated_rect(centre: np.ndarray, w: float, h: float, angle: float) -> Obsta
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="trustfg scenario", description=__doc__.split("\n")[0])
+    parser = command_parser("trustfg scenario", __doc__)
     sub = parser.add_subparsers(dest="action", required=True)
     gen = sub.add_parser("generate", help="make a scene from a seed")
     gen.add_argument("--kind", required=True, choices=list(KINDS))

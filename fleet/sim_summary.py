@@ -15,7 +15,7 @@ from ..agent import messages
 from ..agent.config import Scenario
 from ..agent.world import build_sdf
 from .bus import FleetBus
-from .runs import RunRecord, arrivals, motion_summary
+from .runs import RunRecord, arrivals, motion_summary, plan_outcomes
 from .trust_record import clock_offsets, trust_over_time
 
 
@@ -93,6 +93,7 @@ def summarise(scenario: Scenario, out: Path, recorder: Recorder, t_go: float | N
         "messages": dict(recorder.counts) | {"dropped_by_recorder": dict(recorder.inbox.dropped)},
         "messages_per_car": {str(i): dict(recorder.per_sender.get(i, {})) for i in ids},
         "control": {str(i): (stats[i] or {}).get("control") for i in ids},
+        **_outcomes(ids, stats),
         "crashed": sorted(int(name.split()[1]) for name in crashed if name.startswith("car"))
         + (["mocap-sim"] if "mocap-sim" in crashed else []),
         "clock_offsets": clock_offsets(stats, ids),
@@ -116,6 +117,15 @@ def _read_json(path: Path) -> dict | None:
         return None
 
 
+def _outcomes(ids: list[int], stats: dict[int, dict | None]) -> dict:
+    """``plans`` and ``deadlocks`` (fleet totals, fleet.runs.plan_outcomes) and
+    ``plan_outcomes`` per car, from each car's own counters."""
+    outcomes = plan_outcomes([(stats[i] or {}).get("agent", {}) for i in ids])
+    per_car = outcomes.pop("outcomes")
+    return outcomes | {"plan_outcomes": {str(i): {k.removeprefix("plans_"): v for k, v in car.items()}
+                                         for i, car in zip(ids, per_car)}}
+
+
 def _replan_stats(stats: dict | None) -> dict | None:
     if not stats or not stats.get("replan_ms"):
         return None
@@ -137,6 +147,8 @@ def print_summary(summary: dict) -> None:
         print(f"  {a}: " + "  ".join("  -  " if v is None else f"{v:.2f}" for v in row))
     print("replan ms (median / p95):  " + "  ".join(
         f"{i}: {r['median']}/{r['p95']}" if r else f"{i}: -" for i, r in summary["replan_ms"].items()))
+    print("plans (verified first try / on retry / fallback), deadlocks:  " + "  ".join(
+        f"{i}: {o['first']}/{o['retry']}/{o['fallback']} {o['deadlocks']}" for i, o in summary["plan_outcomes"].items()))
     print("commands (Hz, jitter p99 ms): " + "  ".join(
         f"{i}: {c['rate_hz']}/{c['jitter_ms_p99']}" if c else f"{i}: -" for i, c in summary["control"].items()))
     print("cpu (share of one core, whole run / go to first arrival): " + "  ".join(

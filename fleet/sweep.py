@@ -21,7 +21,6 @@ intervals (fleet.stats). Writes DIR/transparency-sweep/metrics.json and table.md
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import time
 
@@ -29,7 +28,7 @@ from ..agent.config import Scenario
 from ..agent.scenario_files import load_scenario
 from . import stats
 from .adversaries import run_summary
-from .command import configured
+from .command import command_parser, configured
 from .experiments import (
     Progress,
     _pool,
@@ -65,7 +64,7 @@ def table(summary: dict, title: str) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="trustfg experiment transparency-sweep", description=__doc__.split("\n")[0])
+    parser = command_parser("trustfg experiment transparency-sweep", __doc__)
     study_options(parser, seeds=30)
     parser.add_argument("--scene", default="lab", help="scene (default: lab, where every route crosses the liar's)")
     parser.add_argument("--misinformation", nargs="+", type=float, default=[0.05, 0.1, 0.2, 0.4, 0.6, 0.8],

@@ -23,10 +23,13 @@ Fault knobs (all times in seconds since the simulator started):
   --control-port P       take faults at run time as JSON datagrams on 127.0.0.1:P (or the
                          NatNet address): {"occlude": BODY, "seconds": S} hides a rigid body
                          from now for S seconds; {"cut_link": CAR, "seconds": S} makes a car
-                         deaf to its commands; anything else is refused and counted
+                         deaf to its commands; {"reset": true} puts every car back at its
+                         start, standing (the lab's "carry them back" between trials);
+                         anything else is refused and counted
 
-The process prints ``READY`` on stdout once every socket is bound and the stream runs,
-and stops cleanly on SIGTERM or SIGINT.
+The simulated cars answer PING datagrams as firmware must (bridge.carlink.answer). The
+process prints the ports it bound (NatNet, every car's link, the control port), then
+``READY`` on stdout once the stream runs, and stops cleanly on SIGTERM or SIGINT.
 """
 
 from __future__ import annotations
@@ -49,7 +52,7 @@ from ..agent.scenario_files import load_scenario
 from ..agent.vehicle import VehicleState, step
 from ..bridge import natnet
 from ..bridge.carlink import CommandReceiver, link_key
-from ..fleet.command import configured, stop_on_signals
+from ..fleet.command import command_parser, configured, stop_on_signals
 from ..fleet.ticker import ticks
 from .natnet_server import NatNetServer, NatNetServerOptions, Occlusion
 
@@ -152,6 +155,10 @@ class MocapSim:
                     _CommandLog(self.options.command_log) as command_log:
                 log.info("mocap-sim: %d cars, NatNet %s %s on %s:%d", len(receivers), self.options.natnet_version,
                          self.scenario.natnet.mode, *server.command_address)
+                links = " ".join(f"{car}=udp://{r.address[0]}:{r.address[1]}" for car, r in receivers.items())
+                control = f", control port {self.options.control_port}" if self.options.control_port else ""
+                print(f"mocap-sim: NatNet on {server.command_address[0]}:{server.command_address[1]}, "
+                      f"car links {links}{control}", flush=True)
                 ready()
                 self._physics(receivers, writer, command_log)
         finally:
@@ -172,6 +179,10 @@ class MocapSim:
                     continue
                 try:
                     command = json.loads(data)
+                    if isinstance(command, dict) and command.get("reset") is True:
+                        self.reset()
+                        self.control_counts["accepted"] += 1
+                        continue
                     seconds = float(command["seconds"])
                     if not (isinstance(command, dict) and 0 < seconds < 3600):
                         raise ValueError("seconds out of range")
@@ -187,6 +198,13 @@ class MocapSim:
                 except (ValueError, KeyError, TypeError) as exc:
                     self.control_counts["refused"] += 1
                     log.warning("mocap-sim: refused control datagram: %s", exc)
+
+    def reset(self) -> None:
+        """Every car back at its start, standing."""
+        with self._lock:
+            self.states = {car.id: VehicleState(car.start[0], car.start[1], car.start_heading)
+                           for car in self.scenario.cars}
+        log.info("mocap-sim: every car back at its start")
 
     def _ground_truth(self) -> "_CsvWriter":
         return _CsvWriter(self.options.ground_truth)
@@ -260,9 +278,8 @@ class _CsvWriter:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(
-        prog="trustfg mocap-sim", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter,
-        epilog="Times of --occlude and --cut-link are seconds since the simulator started.")
+    parser = command_parser("trustfg mocap-sim", __doc__, whole=True,
+                            epilog="Times of --occlude and --cut-link are seconds since the simulator started.")
     parser.add_argument("--config", required=True, type=Path, help="fleet config TOML (cars need link addresses)")
     parser.add_argument("--natnet-version", choices=natnet.STREAM_VERSIONS, default=natnet.DEFAULT_STREAM_VERSION,
                         help="NatNet version of SERVERINFO and the frames (default %(default)s)")

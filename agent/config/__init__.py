@@ -16,13 +16,22 @@ from dataclasses import dataclass, field
 
 from .attacks import ATTACKS, PAPER_LIAR, AttackConfig, liar_attack, parse_attack
 from .checks import ConfigError, parse_id_values, parse_udp_address, positive, with_overrides
-from .planning import PlannerConfig, TrustConfig
-from .running import BusConfig, ControlConfig, GuardConfig, NatNetConfig, TrackingConfig, VehicleConfig
+from .planning import DeadlockConfig, PlannerConfig, TrustConfig, VerifyConfig
+from .running import (
+    BusConfig,
+    ControlConfig,
+    GuardConfig,
+    NatNetConfig,
+    OperatorConfig,
+    TrackingConfig,
+    VehicleConfig,
+)
 from .scene import CarConfig, Obstacle, SafetyConfig, SimConfig, WorldConfig
 
 __all__ = [
     "ConfigError", "parse_udp_address", "positive", "with_overrides", "PlannerConfig", "TrustConfig",
-    "BusConfig", "ControlConfig", "GuardConfig", "NatNetConfig", "TrackingConfig", "VehicleConfig",
+    "VerifyConfig", "DeadlockConfig",
+    "BusConfig", "ControlConfig", "GuardConfig", "NatNetConfig", "OperatorConfig", "TrackingConfig", "VehicleConfig",
     "CarConfig", "Obstacle", "SafetyConfig", "SimConfig", "WorldConfig", "Scenario", "PALETTE",
     "ATTACKS", "AttackConfig", "PAPER_LIAR", "liar_attack", "parse_attack", "parse_id_values",
 ]
@@ -38,6 +47,8 @@ class Scenario:
     world: WorldConfig = field(default_factory=WorldConfig)
     planner: PlannerConfig = field(default_factory=PlannerConfig)
     trust: TrustConfig = field(default_factory=TrustConfig)
+    verify: VerifyConfig = field(default_factory=VerifyConfig)
+    deadlock: DeadlockConfig = field(default_factory=DeadlockConfig)
     safety: SafetyConfig = field(default_factory=SafetyConfig)
     vehicle: VehicleConfig = field(default_factory=VehicleConfig)
     tracking: TrackingConfig = field(default_factory=TrackingConfig)
@@ -46,6 +57,7 @@ class Scenario:
     control: ControlConfig = field(default_factory=ControlConfig)
     bus: BusConfig = field(default_factory=BusConfig)
     natnet: NatNetConfig = field(default_factory=NatNetConfig)
+    operator: OperatorConfig = field(default_factory=OperatorConfig)
 
     def validate(self, path: str = "") -> None:
         prefix = f"{path}." if path else ""
@@ -59,7 +71,8 @@ class Scenario:
         bodies = [car.body_id for car in self.cars]
         if len(set(bodies)) != len(bodies):
             raise ConfigError(f"{prefix}cars: rigid-body ids must be unique, got {bodies}")
-        for name in ("world", "safety", "planner", "trust", "vehicle", "tracking", "guard", "sim", "control", "bus", "natnet"):
+        for name in ("world", "safety", "planner", "trust", "verify", "deadlock", "vehicle", "tracking", "guard", "sim",
+                     "control", "bus", "natnet", "operator"):
             getattr(self, name).validate(prefix + name)
         if self.safety.peer_margin_m < self.trust.transparency_tolerance_m:
             # A liar can bias its plans by anything under the tolerance unnoticed (it reads
@@ -68,6 +81,9 @@ class Scenario:
             raise ConfigError(f"{prefix}safety.peer_margin_m ({self.safety.peer_margin_m}) must be at least "
                               f"trust.transparency_tolerance_m ({self.trust.transparency_tolerance_m}): the margin "
                               "must cover what a liar can bias its plans by unnoticed")
+        if self.operator.deadman_s and self.control.start_timeout_s:
+            raise ConfigError(f"{prefix}control.start_timeout_s: a car cannot drive without a start while "
+                              f"operator.deadman_s asks it to hear the operator (set one of them to 0)")
 
     @property
     def liars(self) -> list[int]:

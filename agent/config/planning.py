@@ -194,3 +194,79 @@ class TrustConfig:
             "clock_window_s", "audit_period_s", "audit_horizon_s", "audit_notice_s", "testimony_max_evidence",
         ):
             positive(getattr(self, name), f"{path}.{name}")
+
+
+@dataclass(frozen=True)
+class VerifyConfig:
+    """Every plan is checked before a car uses or publishes it (agent.verify); a plan that
+    fails is retried from other starting guesses, and without a verified plan the car
+    brakes along its last verified one (agent.safe_plan). docs/architecture.md, "Verified
+    plans"."""
+
+    enabled: bool = True
+    """Off (ablations only): plans are used as the optimiser returns them."""
+    tolerance: float = 0.25
+    """Share of each safety margin a plan may eat: against a peer the margin is
+    eps_ab - d_ab (what epsilon keeps beyond the breach distance; 0.15 m for two trusted
+    cars of 0.1 m radius, so 0.0375 m may be eaten), against walls it is
+    SafetyConfig.obstacle_margin_m (0.0125 m). The soft hinges leave an optimised plan a
+    few millimetres inside epsilon where it is pressed; the breach distance itself is
+    never eaten (the tolerance is below 1)."""
+    sample_m: float = 0.02
+    """Check times are spaced so that neither the car nor any peer relative to it moves
+    more than about this between two of them; the half step actually travelled is added
+    to every distance a sample must keep, so the check holds between samples too."""
+    limit_lag_m: float = 0.02
+    """How far along its track the car may fall behind (or run ahead of) its plan over
+    ``limits_horizon_s`` because the plan asks for more speed or acceleration than the
+    vehicle has (VehicleConfig): the lag of a follower held to those limits. Less than
+    what the tolerance leaves of any margin (3/4 of 5 cm against walls)."""
+    limits_horizon_s: float = 1.0
+    """Speed and acceleration are checked over this first part of a plan: what the car
+    executes before it has replanned five times. Further on a plan is a promise of path
+    and timing that later replans revise (its far end brakes hard into the goal on
+    sparse support states); its distances are checked over its whole length."""
+    max_attempts: int = 4
+    """Plans tried per replan: the warm-started one, then alternatives (agent.safe_plan:
+    tightened, the other side of a conflict, slower, cold); then the fallback."""
+    retry_iterations: int = 10
+    """Levenberg-Marquardt iterations an alternative may take (the first plan takes the
+    planner's own ``max_iterations``): retries must fit in a replan's budget."""
+    budget_ms: float = 80.0
+    """Wall time after which no further alternative is started in a replan (the car
+    process; the in-process fleet runs on simulated time and counts attempts only)."""
+    fallback_decel_mps2: float = 1.0
+    """Deceleration of the fallback's braking trajectory (below VehicleConfig's limit, so
+    the car can follow it)."""
+
+    def validate(self, path: str) -> None:
+        if not 0.0 <= self.tolerance < 1.0:
+            raise ConfigError(f"{path}.tolerance: must be within [0, 1): the breach distance is never eaten")
+        if self.limit_lag_m < 0:
+            raise ConfigError(f"{path}.limit_lag_m: must be >= 0")
+        if self.max_attempts < 1 or self.retry_iterations < 1:
+            raise ConfigError(f"{path}.max_attempts/retry_iterations: must be >= 1")
+        for name in ("sample_m", "limits_horizon_s", "budget_ms", "fallback_decel_mps2"):
+            positive(getattr(self, name), f"{path}.{name}")
+
+
+@dataclass(frozen=True)
+class DeadlockConfig:
+    """Deadlocks (agent.deadlock): a car that has not come ``progress_m`` nearer its goal
+    for ``window_s`` while a peer within ``group_radius_m`` is stuck too, is in a deadlock;
+    the car of lower priority gives way."""
+
+    enabled: bool = True
+    """Off (ablations only): deadlocks are still detected and counted, not resolved."""
+    window_s: float = 6.0
+    progress_m: float = 0.1
+    group_radius_m: float = 1.0
+    """Peers nearer than this (centres) that are stuck too belong to our group."""
+    yield_s: float = 3.0
+    """How long a car that gives way keeps its detour before it heads for its goal again."""
+    detour_m: float = 0.6
+    """How far the detour goal lies from where the car gave way."""
+
+    def validate(self, path: str) -> None:
+        for name in ("window_s", "progress_m", "group_radius_m", "yield_s", "detour_m"):
+            positive(getattr(self, name), f"{path}.{name}")

@@ -100,15 +100,59 @@ class ControlConfig:
     """A car whose own pose is older than this is commanded to stop."""
     start_timeout_s: float = 0.0
     """Drive without a start message after this long (0: wait for one forever)."""
+    link_ping_period_s: float = 0.5
+    """How often the car process PINGs its car (bridge.carlink.answer): whether the link
+    answers, and whether the car's e-stop is latched."""
+    retry_s: float = 2.0
+    """Pause between attempts to reach Motive or to open the bus while a car process starts
+    (it keeps its car stopped meanwhile)."""
 
     def validate(self, path: str) -> None:
         for name in ("command_rate_hz", "replan_period_s", "plan_period_s", "trust_report_period_s",
-                     "pose_period_s", "status_period_s", "pose_timeout_s", "lap_turn_s"):
+                     "pose_period_s", "status_period_s", "pose_timeout_s", "lap_turn_s",
+                     "link_ping_period_s", "retry_s"):
             positive(getattr(self, name), f"{path}.{name}")
         if self.laps < 1:
             raise ConfigError(f"{path}.laps: must be >= 1")
         if self.start_timeout_s < 0:
             raise ConfigError(f"{path}.start_timeout_s: must be >= 0")
+
+
+@dataclass(frozen=True)
+class OperatorConfig:
+    """The operator's hold on the fleet (docs/architecture.md, "Start and stop"): trials,
+    the deadman and the bring-up check. Lab configs switch the deadman on."""
+
+    deadman_s: float = 0.0
+    """A car stops (its trial is aborted, it waits for a new start) when no heartbeat of
+    an operator's session (``trustfg go``, the dashboard in operator mode, the launcher)
+    has arrived for this long, and takes a start only while it hears one. 0: off."""
+    heartbeat_period_s: float = 0.1
+    """How often an operator's session publishes its heartbeat."""
+    rejoin_trial: bool = False
+    """A car process that comes up after its departure time (restarted by its supervisor)
+    joins the running trial from the operator's cached start. False: it waits for the
+    operator to start it again."""
+    release_s: float = 0.8
+    """How long a car process's datagrams carry RELEASE after the operator released it
+    (while it waits), and the operator's tools send their own RELEASE straight to a
+    version-2 link (a car latches per sender), seconds: longer than an operator's e-stop repeats on the link (0.5 s,
+    fleet.link_stop), so a repeat still in flight cannot latch the car again, and enough
+    datagrams (40 at 50 Hz) that losing some does not matter."""
+    clock_tolerance_s: float = 0.02
+    """``trustfg check`` warns when a car computer's clock is further than this from the
+    operator's (plans and departures carry absolute times)."""
+
+    def validate(self, path: str) -> None:
+        if self.deadman_s < 0:
+            raise ConfigError(f"{path}.deadman_s: must be >= 0 (0 switches the deadman off)")
+        positive(self.heartbeat_period_s, f"{path}.heartbeat_period_s")
+        positive(self.clock_tolerance_s, f"{path}.clock_tolerance_s")
+        if self.deadman_s and self.deadman_s < 2 * self.heartbeat_period_s:
+            raise ConfigError(f"{path}.deadman_s: must be at least twice heartbeat_period_s "
+                              f"({self.heartbeat_period_s} s), or 0")
+        if not 0.1 <= self.release_s <= 10.0:
+            raise ConfigError(f"{path}.release_s: must be within [0.1, 10] s")
 
 
 @dataclass(frozen=True)
@@ -119,7 +163,10 @@ class BusConfig:
     Lab: multicast scouting on the Wi-Fi interface, listed endpoints, or a router
     (``mode = "client"`` with ``connect`` naming it). ``zenoh_config`` names a JSON5 file
     (deploy/zenoh/) used as the base -- TLS, access control -- that the fields here
-    complete.
+    complete: endpoints are added to the file's; mode and multicast scouting come from the
+    file when it sets them, and a value here that contradicts the file is an error
+    (fleet.bus.zenoh_config). Without multicast scouting a session opens at once (no
+    scouting delay).
     """
 
     mode: str = "peer"

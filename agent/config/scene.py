@@ -158,6 +158,10 @@ class SafetyConfig:
         """The obstacle hinge's threshold, centre to surface."""
         return radius + (self.clearance_m + self.obstacle_margin_m)
 
+    def obstacle_breach(self, radius: float) -> float:
+        """Centre-to-surface distance below which a car breaches the clearance to a wall."""
+        return radius + self.clearance_m
+
 
 @dataclass(frozen=True)
 class SimConfig:

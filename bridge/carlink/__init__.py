@@ -8,15 +8,18 @@ Three pieces, each documented where it lives:
 * :mod:`.receiver` -- the car's rules (pure): :class:`CommandFilter`, which datagrams a car
   accepts and what it applies (sequence numbers, restarts, watchdog, E_STOP/STOP). Real
   firmware runs these rules; mocap_sim's simulated car runs this very class.
+* :mod:`.answer` -- the bytes a car sends back to a PING datagram (pure).
 * :mod:`.link` -- the sockets (thin I/O): :class:`CommandSender` for the car process and
+  the operator's tools (:meth:`CommandSender.for_car` builds it from a car's config) and
   :class:`CommandReceiver`, a reader thread feeding a :class:`CommandFilter`.
 * :mod:`.keys` -- where a car's link key comes from (its key file) and how one is made.
 
-Imports point one way: ``receiver``, ``keys`` and ``link`` use ``codec``, ``link`` uses
-``receiver`` and ``keys``.
+Imports point one way: ``answer``, ``receiver``, ``keys`` and ``link`` use ``codec``,
+``receiver`` uses ``answer``, ``link`` uses ``answer``, ``receiver`` and ``keys``.
 Everything public is re-exported here, so callers import from ``trustfg.bridge.carlink``.
 """
 
+from .answer import ANSWER_SIZE, ANSWER_V2_SIZE, Answer, CarState, decode_answer, encode_answer
 from .codec import (
     DATAGRAM_SIZE,
     DATAGRAM_V2_SIZE,
@@ -58,5 +61,6 @@ __all__ = [
     "Flags", "decode_command", "decode_command_v2", "encode_command", "encode_command_v2", "seq_after",
     "link_key", "new_key", "write_key_file", "new_session",
     "DEFAULT_RESYNC_AFTER_S", "DEFAULT_WATCHDOG_TIMEOUT_S", "CommandFilter", "FilterCounters",
+    "ANSWER_SIZE", "ANSWER_V2_SIZE", "Answer", "CarState", "decode_answer", "encode_answer",
     "Clock", "CommandReceiver", "CommandSender", "SenderStats",
 ]

@@ -18,16 +18,24 @@ Exactly 30 bytes, little-endian, no padding, IEEE 754 floats::
     8      8    f64   stamp_s      sender's fleet clock, seconds (finite)
     16     4    f32   v_mps        linear velocity, m/s (finite)
     20     4    f32   omega_radps  angular velocity, rad/s, counter-clockwise positive (finite)
-    24     2    u16   flags        bit 0 E_STOP, bit 1 STOP, bits 2..15 must be 0
+    24     2    u16   flags        bit 0 E_STOP, bit 1 STOP, bit 2 RELEASE, bit 3 PING,
+                                   bits 4..15 must be 0
     26     4    u32   crc32        CRC-32 over bytes 0..25
 
-Flags:
+Flags (what a car does with each is in :mod:`.receiver`):
 
-* ``E_STOP`` (0x0001): stop now and stay stopped (latched) until a valid command arrives
-  *without* this bit. The sender keeps E_STOP in every datagram while an e-stop is on,
-  including the STOP datagrams it sends when it shuts down.
+* ``E_STOP`` (0x0001): stop now and stay stopped (latched) until a datagram with RELEASE
+  from the same sender (version 2: the same ``source``) arrives. Taken whatever its
+  sequence number or session: the operator sends it straight to the car, next to the car
+  process's own stream.
 * ``STOP`` (0x0002): hold still while this is the latest command (not latched); v and
-  omega are ignored. Sent on shutdown and when the car process loses its pose.
+  omega are ignored. Sent while a car waits, on shutdown and when its pose is lost.
+* ``RELEASE`` (0x0004): clears the E_STOP its sender latched (in sequence: the car process
+  after the operator released the car; version 2, the operator's own tools for the e-stops
+  they sent straight to the car). Never together with E_STOP.
+* ``PING`` (0x0008): answer this datagram (:mod:`.answer`) and otherwise ignore it, except
+  that an E_STOP in it still latches. The operator's tools use it to see that a car link
+  answers (``trustfg check``) and that an e-stop latched (``trustfg stop``).
 
 CRC: CRC-32/ISO-HDLC, the one of zlib, Ethernet and PNG -- width 32, polynomial
 0x04C11DB7 (0xEDB88320 bit-reflected), init 0xFFFFFFFF, input and output reflected,
@@ -48,7 +56,8 @@ flags (CRC 0xC0E042BB)::
     00 00 80 3e 00 00 00 bf 00 00 bb 42 e0 c0
 
 A receiver rejects, in this order: wrong length, bad magic, unknown version, bad CRC,
-car id 0, non-finite stamp/v/omega (NaN or infinity), reserved flag bits set. Encoding
+car id 0, non-finite stamp/v/omega (NaN or infinity), reserved flag bits set or E_STOP
+with RELEASE. Encoding
 rounds v and omega to the nearest f32 (a value beyond the f32 range is an error).
 
 Datagram (version 2, authenticated)
@@ -61,7 +70,7 @@ Exactly 52 bytes, little-endian, no padding, IEEE 754 floats::
     3      1    u8    car_id       1..255 (0 is invalid)
     4      1    u8    source       which sender: 0 the car process, 1 the operator, ...
     5      1    u8    reserved     0
-    6      2    u16   flags        as in version 1 (bit 0 E_STOP, bit 1 STOP)
+    6      2    u16   flags        as in version 1 (E_STOP, STOP, RELEASE, PING)
     8      8    u64   session      the sender's session: its wall clock when it started,
                                    microseconds since the Unix epoch (a restarted sender
                                    has a larger one)
@@ -144,9 +153,11 @@ class Flags(enum.IntFlag):
     NONE = 0
     E_STOP = 0x0001
     STOP = 0x0002
+    RELEASE = 0x0004
+    PING = 0x0008
 
 
-_KNOWN_FLAGS = int(Flags.E_STOP | Flags.STOP)
+_KNOWN_FLAGS = int(Flags.E_STOP | Flags.STOP | Flags.RELEASE | Flags.PING)
 
 
 @dataclass(frozen=True)
@@ -172,6 +183,8 @@ class Command:
         _check_int("flags", self.flags, 0, 0xFFFF)
         if int(self.flags) & ~_KNOWN_FLAGS:
             raise CarLinkError("flags", f"reserved flag bits set: 0x{int(self.flags):04x}")
+        if int(self.flags) & Flags.E_STOP and int(self.flags) & Flags.RELEASE:
+            raise CarLinkError("flags", "E_STOP and RELEASE together")
         object.__setattr__(self, "flags", Flags(int(self.flags)))
         _check_float("stamp_s", self.stamp_s)
         _check_float("v_mps", self.v_mps, f32=True)
@@ -184,6 +197,14 @@ class Command:
     @property
     def stop(self) -> bool:
         return bool(self.flags & Flags.STOP)
+
+    @property
+    def release(self) -> bool:
+        return bool(self.flags & Flags.RELEASE)
+
+    @property
+    def ping(self) -> bool:
+        return bool(self.flags & Flags.PING)
 
 
 def _check_int(name: str, value: object, low: int, high: int) -> None:
@@ -212,28 +233,47 @@ def _check_float(name: str, value: object, f32: bool = False) -> None:
 
 def encode_command(cmd: Command) -> bytes:
     """The 30-byte datagram of ``cmd`` (v and omega rounded to f32)."""
-    body = _BODY.pack(MAGIC, VERSION, cmd.car_id, cmd.seq, cmd.stamp_s, cmd.v_mps,
-                      cmd.omega_radps, int(cmd.flags))
-    return body + _CRC.pack(zlib.crc32(body))
+    return seal(_BODY.pack(MAGIC, VERSION, cmd.car_id, cmd.seq, cmd.stamp_s, cmd.v_mps,
+                           cmd.omega_radps, int(cmd.flags)))
 
 
 def decode_command(data: bytes | bytearray | memoryview) -> Command:
     """The command in a datagram; raises :class:`CarLinkError` (and nothing else) if invalid."""
+    _, _, car_id, seq, stamp_s, v_mps, omega_radps, flags = open_frame(data, _BODY, MAGIC, VERSION)
+    return Command(car_id, seq, stamp_s, v_mps, omega_radps, flags)
+
+
+def seal(body: bytes, key: bytes | None = None) -> bytes:
+    """A datagram: its body, then its check -- version 1 the CRC-32 of the body (u32,
+    little-endian), version 2 (with the car's ``key``) the MAC of the body. Commands and
+    answers (:mod:`.answer`) share this framing."""
+    return body + (_CRC.pack(zlib.crc32(body)) if key is None else mac(check_key(key), body))
+
+
+def open_frame(data: object, layout: struct.Struct, magic: bytes, version: int,
+               key: bytes | None = None) -> tuple:
+    """The body fields of a sealed datagram whose body is ``layout`` (starting with the
+    magic and the version), after checking, in this order, type, length, magic, version
+    and the CRC (without ``key``) or the MAC (with it); :class:`CarLinkError` otherwise."""
     if not isinstance(data, (bytes, bytearray, memoryview)):
         raise CarLinkError("type", f"expected bytes, got {type(data).__name__}")
     data = bytes(data)
-    if len(data) != DATAGRAM_SIZE:
-        raise CarLinkError("length", f"{len(data)} bytes, expected {DATAGRAM_SIZE}")
-    magic, version, car_id, seq, stamp_s, v_mps, omega_radps, flags = _BODY.unpack_from(data)
-    if magic != MAGIC:
-        raise CarLinkError("magic", f"magic {magic!r}, expected {MAGIC!r}")
-    if version != VERSION:
-        raise CarLinkError("version", f"version {version}, this end speaks {VERSION}")
-    (crc,) = _CRC.unpack_from(data, _BODY.size)
-    expected = zlib.crc32(data[:_BODY.size])
-    if crc != expected:
-        raise CarLinkError("crc", f"crc 0x{crc:08x}, computed 0x{expected:08x}")
-    return Command(car_id, seq, stamp_s, v_mps, omega_radps, flags)
+    check = _CRC.size if key is None else MAC_BYTES
+    if len(data) != layout.size + check:
+        raise CarLinkError("length", f"{len(data)} bytes, expected {layout.size + check}")
+    fields = layout.unpack_from(data)
+    if fields[0] != magic:
+        raise CarLinkError("magic", f"magic {fields[0]!r}, expected {magic!r}")
+    if fields[1] != version:
+        raise CarLinkError("version", f"version {fields[1]}, this end speaks {version}")
+    body = data[:layout.size]
+    if key is None:
+        (crc,) = _CRC.unpack_from(data, layout.size)
+        if crc != zlib.crc32(body):
+            raise CarLinkError("crc", f"crc 0x{crc:08x}, computed 0x{zlib.crc32(body):08x}")
+    elif not hmac.compare_digest(data[layout.size:], mac(key, body)):
+        raise CarLinkError("mac", "the MAC does not verify: wrong key, or altered or forged")
+    return fields
 
 
 def check_key(key: object) -> bytes:
@@ -251,27 +291,15 @@ def mac(key: bytes, body: bytes) -> bytes:
 
 def encode_command_v2(cmd: Command, key: bytes) -> bytes:
     """The 52-byte authenticated datagram of ``cmd`` (v and omega rounded to f32)."""
-    body = _BODY_V2.pack(MAGIC, VERSION_2, cmd.car_id, cmd.source, 0, int(cmd.flags), cmd.session,
-                         cmd.seq, cmd.stamp_s, cmd.v_mps, cmd.omega_radps)
-    return body + mac(check_key(key), body)
+    return seal(_BODY_V2.pack(MAGIC, VERSION_2, cmd.car_id, cmd.source, 0, int(cmd.flags), cmd.session,
+                              cmd.seq, cmd.stamp_s, cmd.v_mps, cmd.omega_radps), key)
 
 
 def decode_command_v2(data: bytes | bytearray | memoryview, key: bytes) -> Command:
     """The command in an authenticated datagram; raises :class:`CarLinkError` (and nothing
     else) if it is invalid or its MAC does not verify with ``key``."""
-    if not isinstance(data, (bytes, bytearray, memoryview)):
-        raise CarLinkError("type", f"expected bytes, got {type(data).__name__}")
-    data = bytes(data)
-    if len(data) != DATAGRAM_V2_SIZE:
-        raise CarLinkError("length", f"{len(data)} bytes, expected {DATAGRAM_V2_SIZE}")
-    (magic, version, car_id, source, reserved, flags, session, seq, stamp_s, v_mps,
-     omega_radps) = _BODY_V2.unpack_from(data)
-    if magic != MAGIC:
-        raise CarLinkError("magic", f"magic {magic!r}, expected {MAGIC!r}")
-    if version != VERSION_2:
-        raise CarLinkError("version", f"version {version}, this end speaks {VERSION_2}")
-    if not hmac.compare_digest(data[_BODY_V2.size:], mac(key, data[:_BODY_V2.size])):
-        raise CarLinkError("mac", "the MAC does not verify: wrong key, or altered or forged")
+    (_, _, car_id, source, reserved, flags, session, seq, stamp_s, v_mps,
+     omega_radps) = open_frame(data, _BODY_V2, MAGIC, VERSION_2, key)
     if reserved != 0:
         raise CarLinkError("reserved", f"reserved byte is 0x{reserved:02x}, must be 0")
     return Command(car_id, seq, stamp_s, v_mps, omega_radps, flags, session, source)

@@ -15,9 +15,19 @@ import os
 import secrets
 import stat
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from ...agent.config import CarConfig, ConfigError
 from .codec import KEY_BYTES
+
+if TYPE_CHECKING:
+    from ...agent.config import CarConfig
+
+
+def _config_error(message: str) -> Exception:
+    # the typed config loads lazily: trustfg stop reads keys before it (fleet.link_stop)
+    from ...agent.config import ConfigError
+
+    return ConfigError(message)
 
 log = logging.getLogger(__name__)
 
@@ -28,14 +38,14 @@ def parse_key(text: str, where: str) -> bytes:
     try:
         key = bytes.fromhex(digits)
     except ValueError:
-        raise ConfigError(f"{where}: a car-link key is {2 * KEY_BYTES} hexadecimal digits") from None
+        raise _config_error(f"{where}: a car-link key is {2 * KEY_BYTES} hexadecimal digits") from None
     if len(key) != KEY_BYTES:
-        raise ConfigError(f"{where}: a car-link key is {KEY_BYTES} bytes ({2 * KEY_BYTES} hex digits), "
+        raise _config_error(f"{where}: a car-link key is {KEY_BYTES} bytes ({2 * KEY_BYTES} hex digits), "
                           f"got {len(key)}")
     return key
 
 
-def link_key(car: CarConfig) -> bytes | None:
+def link_key(car: "CarConfig") -> bytes | None:
     """The key the car's link uses: None for version 1; for version 2 its key file's (or
     inline) key, or a ConfigError saying what to configure."""
     where = f"cars[id={car.id}]"
@@ -47,13 +57,13 @@ def link_key(car: CarConfig) -> bytes | None:
             text = path.read_text()
             mode = path.stat().st_mode
         except OSError as exc:
-            raise ConfigError(f"{where}.link_key_file: cannot read {path}: {exc.strerror}") from None
+            raise _config_error(f"{where}.link_key_file: cannot read {path}: {exc.strerror}") from None
         if mode & (stat.S_IRWXG | stat.S_IRWXO):
             log.warning("%s.link_key_file %s is readable by others (chmod 600 it)", where, path)
         return parse_key(text, f"{where}.link_key_file ({path})")
     if car.link_key:
         return parse_key(car.link_key, f"{where}.link_key")
-    raise ConfigError(f"{where}: the car link (version 2, authenticated) needs the car's key: set "
+    raise _config_error(f"{where}: the car link (version 2, authenticated) needs the car's key: set "
                       f"link_key_file (or link_version = 1 for old firmware without authentication)")
 
 

@@ -7,29 +7,36 @@ Sender (:class:`CommandSender`): one datagram per :meth:`~CommandSender.send`, n
 and stamped; version 2 (authenticated, a new session per sender) when it has the car's
 key, version 1 without. :meth:`CommandSender.for_car` picks the version, the key and the
 address from a car's config, so every sender of a car (its car process, an operator's
-e-stop) speaks what the car expects. It keeps no schedule of its own: the car process's control loop calls
-``send()`` at ``control.command_rate_hz`` (50 Hz) on absolute deadlines, and a late tick
+e-stop) speaks what the car expects. It keeps no schedule of its own: the car process's
+control loop calls ``send()`` at ``control.command_rate_hz`` (50 Hz) on absolute deadlines, and a late tick
 sends once rather than catching up in a burst (``fleet/ticker.py``). On shutdown it sends
 a few STOP datagrams, with E_STOP if the last command had it.
 
+The sender also reads, without blocking, the answers a car sends back to its PING
+datagrams (:mod:`.answer`) on the same socket (:meth:`CommandSender.answers`).
+
 Receiver (:class:`CommandReceiver`): a bound UDP socket and a reader thread that feeds
-every datagram to a :class:`~.receiver.CommandFilter` (mocap_sim's simulated cars use it).
+every datagram to a :class:`~.receiver.CommandFilter` and answers PINGs from the same
+socket (mocap_sim's simulated cars use it).
+
 """
 
 from __future__ import annotations
 
 import logging
+import select
 import socket
 import threading
 import time
 from dataclasses import dataclass
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
-from ...agent.config import CarConfig, parse_udp_address
+from .answer import Answer, decode_answer, encode_answer
 from .codec import (
     SEQ_MODULUS,
     SESSION_MODULUS,
     SOURCE_CAR_PROCESS,
+    CarLinkError,
     Command,
     Flags,
     _check_int,
@@ -44,6 +51,9 @@ from .receiver import (
     CommandFilter,
     FilterCounters,
 )
+
+if TYPE_CHECKING:
+    from ...agent.config import CarConfig
 
 log = logging.getLogger(__name__)
 
@@ -69,10 +79,13 @@ def new_session() -> int:
 @dataclass(frozen=True)
 class SenderStats:
     """Counts of a :class:`CommandSender`: ``sent`` datagrams handed to the socket (commands
-    and STOP datagrams alike) and ``send_errors``, datagrams the socket refused."""
+    and STOP datagrams alike), ``send_errors``, datagrams the socket refused, ``answers``
+    received and ``bad_answers`` (invalid, forged, from another car or of another session), dropped."""
 
     sent: int = 0
     send_errors: int = 0
+    answers: int = 0
+    bad_answers: int = 0
 
 
 def _resolve(address: tuple[str, int], passive: bool) -> tuple[socket.AddressFamily, tuple]:
@@ -123,17 +136,32 @@ class CommandSender:
         self._last_flags = Flags.NONE
         self._sent = 0
         self._send_errors = 0
+        self._answers = 0
+        self._bad_answers = 0
 
     @classmethod
-    def for_car(cls, car: CarConfig, *, source: int = SOURCE_CAR_PROCESS, **options) -> "CommandSender":
-        """A sender to ``car`` as its config says: its ``link`` address, and version 2 with
-        its key unless it asks for version 1. ConfigError for a missing or bad key."""
+    def for_car(cls, car: "CarConfig", *, source: int = SOURCE_CAR_PROCESS, stamp_clock: Clock = time.time,
+                **options) -> "CommandSender":
+        """The one place that turns a car's config into a sender to it -- the car process's
+        and the operator's tools' (``source=SOURCE_OPERATOR``: trustfg stop, check, go, the
+        dashboard) alike: its ``link`` address, and version 2 with its key unless it asks
+        for version 1. ConfigError for a bad address or a missing or bad key."""
+        from ...agent.config import parse_udp_address  # not at import: trustfg stop's first datagrams go first
+
         host, port = parse_udp_address(car.link, f"cars[id={car.id}].link")
-        return cls(car.id, (host, port), key=link_key(car), source=source, **options)
+        return cls(car.id, (host, port), key=link_key(car), source=source, stamp_clock=stamp_clock, **options)
 
     @property
     def version(self) -> int:
         return 1 if self._key is None else 2
+
+    def renew_session(self) -> None:
+        """Version 2: go on in a new session (seq from 0). An operator's tool does this
+        before a RELEASE, which the car takes only in its source's newest session
+        (receiver, rules 4 and 7): another tool of the operator may have sent since."""
+        with self._lock:
+            if self._key is not None:
+                self.session, self._seq = new_session(), 0
 
     def __enter__(self) -> CommandSender:
         return self
@@ -144,7 +172,8 @@ class CommandSender:
     @property
     def stats(self) -> SenderStats:
         with self._lock:
-            return SenderStats(sent=self._sent, send_errors=self._send_errors)
+            return SenderStats(sent=self._sent, send_errors=self._send_errors, answers=self._answers,
+                               bad_answers=self._bad_answers)
 
     def send(self, v_mps: float, omega_radps: float, flags: Flags | int = Flags.NONE) -> Command | None:
         """Send one datagram now, stamped and numbered; the command, or None if the socket failed.
@@ -161,8 +190,9 @@ class CommandSender:
             if self._seq == 0 and self._key is not None:  # version 2 never wraps: a new session
                 self.session = new_session()
             # What the caller asked for, even if the socket fails: stop() keeps an e-stop
-            # whose own datagram was lost.
-            self._last_flags = cmd.flags
+            # whose own datagram was lost. A PING is not a command.
+            if not cmd.ping:
+                self._last_flags = cmd.flags
             datagram = encode_command(cmd) if self._key is None else encode_command_v2(cmd, self._key)
             try:
                 self._sock.sendto(datagram, self._sockaddr)
@@ -172,6 +202,30 @@ class CommandSender:
                 return None
             self._sent += 1
             return cmd
+
+    def answers(self) -> list[Answer]:
+        """The car's answers to our PINGs that have arrived since the last call (never blocks):
+        in the link's version, for this car and (version 2) this sender's session."""
+        got = []
+        with self._lock:
+            # The socket has a (send) timeout, under which recv would wait: poll first.
+            while self._sock is not None and select.select([self._sock], [], [], 0.0)[0]:
+                try:
+                    data = self._sock.recv(_RECV_BUFFER_BYTES)
+                except OSError as exc:  # e.g. ICMP port unreachable on some systems: nobody answers
+                    log.debug("car %d: reading answers: %s", self.car_id, exc)
+                    break
+                try:
+                    answer = decode_answer(data, self._key)
+                except CarLinkError:
+                    self._bad_answers += 1
+                    continue
+                if answer.car_id != self.car_id or answer.session != self.session:
+                    self._bad_answers += 1
+                    continue
+                self._answers += 1
+                got.append(answer)
+        return got
 
     def stop(self) -> None:
         """Send the STOP datagrams (E_STOP kept if the last command had it); a no-op once closed."""
@@ -214,6 +268,7 @@ class CommandReceiver:
                  recv_timeout_s: float = 0.1, join_timeout_s: float = 1.0):
         self._filter = CommandFilter(car_id, key=key, watchdog_timeout_s=watchdog_timeout_s,
                                      resync_after_s=resync_after_s)
+        self._key = check_key(key) if key is not None else None
         self.car_id = car_id
         self._clock = clock
         self._join_timeout_s = join_timeout_s
@@ -294,7 +349,7 @@ class CommandReceiver:
 
     def _receive_one(self, sock: socket.socket) -> None:
         try:
-            data, _ = sock.recvfrom(_RECV_BUFFER_BYTES)
+            data, source = sock.recvfrom(_RECV_BUFFER_BYTES)
         except TimeoutError:
             return
         except OSError as exc:
@@ -309,5 +364,12 @@ class CommandReceiver:
             return
         now = self._clock()
         with self._changed:
-            self._filter.accept(data, now)
+            cmd = self._filter.accept(data, now)
+            answer = self._filter.answer(cmd, now) if cmd is not None and cmd.ping else None
+            key = self._key
             self._changed.notify_all()
+        if answer is not None:
+            try:
+                sock.sendto(encode_answer(answer, key), source)
+            except OSError as exc:
+                log.debug("car %d: answer to %s failed: %s", self.car_id, source, exc)

@@ -7,9 +7,22 @@ Receiver rules (what the car firmware does; :class:`CommandFilter`)
 ---------------------------------------------------------------------
 1. Decode; drop invalid datagrams and datagrams for another car id. A car with a key
    decodes version 2 only (a bad MAC is dropped as ``mac``); a car without one, version 1.
-2. Version 2 -- sessions (replays are refused, also across a sender's restart). Per
-   ``source`` (the car process, the operator, ...) the car keeps the newest session it has
-   accepted and the last sequence number in it:
+   Every version-2 datagram names its ``source`` (0 the car process, 1 the operator, ...);
+   a version-1 datagram is always source 0.
+2. E_STOP latches for its source at once, whatever the datagram's sequence number or
+   session, and without touching the sequence reference or the watchdog's clock (rules
+   4, 5 and 6). An e-stop may come from a second sender -- the operator, straight to the
+   car (``trustfg stop``, go's key, the dashboard's button) -- whose numbers have nothing
+   to do with the car process's, or from an older session of the operator's tools than the
+   newest the car has seen; taking one can only make the car safer. (A replayed e-stop
+   stops the car: a denial of service, which jamming the radio achieves as well; it can
+   never make a car move. Version 2 still needs the car's key to make one.)
+3. PING: the car answers (:mod:`.answer`, to the datagram's source address and port) after
+   rule 2; a PING is otherwise not applied and does not touch the sequence, the sessions
+   or the watchdog, so the operator's checks never disturb the car process's stream.
+4. Version 2 -- sessions (replays are refused, also across a sender's restart). Per
+   source the car keeps the newest session it has accepted and the last sequence number
+   in it:
 
    * a datagram of that session is accepted only if its seq is larger than the last one
      (a repeat or an older one is a replay, or overtaken on the air: dropped);
@@ -24,20 +37,27 @@ Receiver rules (what the car firmware does; :class:`CommandFilter`)
    the newest session per source in non-volatile memory to close this); and a datagram
    held back by an attacker may still arrive late, within its session's order (the
    watchdog bounds what a withheld stream can do).
-3. Version 1 -- sequence numbers compare with serial-number arithmetic (RFC 1982, 32 bits):
+5. Version 1 -- sequence numbers compare with serial-number arithmetic (RFC 1982, 32 bits):
    ``s`` is after ``last`` iff ``0 < (s - last) mod 2**32 < 2**31``. Only a datagram after
    the last accepted one is accepted. The first datagram ever is accepted whatever its seq.
    Restarted sender: if no datagram has been *accepted* for ``resync_after_s`` (default
-   1.0 s), the next valid datagram is accepted whatever its seq. (The CRC detects
-   corruption, not forgery: after a silence a replayed capture looks like a restarted
-   sender -- version 2 exists for that.)
-4. Watchdog: the command to apply is (0, 0) once the last accepted command is
+   1.0 s), the next valid datagram is accepted whatever its seq. This is why, in version 1,
+   a second sender must send nothing but E_STOP and PING: an ordinary command accepted out
+   of the car process's sequence would become the reference and the car would stand until
+   the resync. (The CRC detects corruption, not forgery: after a silence a replayed capture
+   looks like a restarted sender -- version 2 exists for that.)
+6. Watchdog: the command to apply is (0, 0) once the last accepted command is
    ``watchdog_timeout_s`` (default 0.250 s) old, measured on the receiver's clock (the
    sender's stamp is for logs and latency only; the clocks need not agree).
-5. (0, 0) also while E_STOP is latched, or while the latest command has STOP. E_STOP is
-   latched per source: it is released only by a datagram *from the source that set it*
-   without the bit, so one sender (the car process) cannot release another's (the
-   operator's) e-stop. (Version 1 has one source.)
+7. RELEASE: only an accepted datagram (rules 4, 5) with RELEASE *from the source that set
+   the e-stop* clears that source's latch. The car process sends RELEASE for a few
+   datagrams after the operator released the car; the operator's tools send it (version 2,
+   in a new session of their own) for the e-stops they sent straight to the car. Nothing
+   else releases -- neither silence, nor ordinary commands, nor another source -- so an
+   e-stop the operator sent straight to the car holds while a car process that never heard
+   of it keeps driving. (Version 1 has one source: there the car process's RELEASE clears
+   every e-stop, the operator's direct ones too.)
+8. (0, 0) while any source's E_STOP is latched, or while the latest command has STOP.
 """
 
 from __future__ import annotations
@@ -47,6 +67,7 @@ from collections import Counter
 from dataclasses import dataclass, field
 from typing import Mapping
 
+from .answer import Answer, CarState
 from .codec import CarLinkError, Command, _check_int, check_key, decode_command, decode_command_v2, seq_after
 
 log = logging.getLogger(__name__)
@@ -69,6 +90,10 @@ class FilterCounters:
 
     accepted: int = 0
     resynced: int = 0
+    e_stops: int = 0
+    """Datagrams with E_STOP taken (rule 2), in or out of sequence; not in ``accepted``."""
+    pings: int = 0
+    """PING datagrams answered (rule 3); not in ``accepted``."""
     wrong_car: int = 0
     stale_seq: int = 0
     repeated_seq: int = 0
@@ -129,6 +154,7 @@ class CommandFilter:
     @property
     def counters(self) -> FilterCounters:
         return FilterCounters(accepted=self._counts["accepted"], resynced=self._counts["resynced"],
+                              e_stops=self._counts["e_stops"], pings=self._counts["pings"],
                               wrong_car=self._counts["wrong_car"], stale_seq=self._counts["stale_seq"],
                               repeated_seq=self._counts["repeated_seq"],
                               decode_errors=dict(self._decode_errors), new_session=self._counts["new_session"],
@@ -136,6 +162,7 @@ class CommandFilter:
 
     def accept(self, data: bytes, now_s: float) -> Command | None:
         """Decode and filter one datagram received at ``now_s``; None (counted) if dropped.
+        A PING comes back (it is to be answered: :meth:`answer`) but is not applied.
 
         Never raises for any bytes-like input.
         """
@@ -149,10 +176,29 @@ class CommandFilter:
             self._counts["wrong_car"] += 1
             log.debug("car %d: dropped datagram for car %d", self.car_id, cmd.car_id)
             return None
+        if cmd.e_stop:  # rule 2: from any sender, in or out of sequence or session
+            if cmd.source not in self._e_stop_sources:
+                log.warning("car %d: E-STOP latched by source %d (seq %d)", self.car_id, cmd.source, cmd.seq)
+            self._e_stop_sources.add(cmd.source)
+            self._counts["e_stops"] += 1
+            if cmd.ping:
+                self._counts["pings"] += 1
+            return cmd
+        if cmd.ping:  # rule 3: answered, not applied
+            self._counts["pings"] += 1
+            return cmd
         if not (self._sequence_ok(cmd, now_s) if self._key is None else self._session_ok(cmd)):
             return None
         self._take(cmd, now_s)
         return cmd
+
+    def answer(self, ping: Command, now_s: float) -> Answer:
+        """The answer to a PING datagram (rule 3): the car's state after handling it, and
+        the PING's source, session, seq and stamp, so its sender knows it for its own."""
+        state = CarState.E_STOP_LATCHED if self._e_stop_sources else CarState.NONE
+        if self.active_command(now_s) == (0.0, 0.0):
+            state |= CarState.STOPPED
+        return Answer(self.car_id, ping.seq, ping.stamp_s, state, ping.session, ping.source)
 
     def active_command(self, now_s: float) -> tuple[float, float]:
         """The (v_mps, omega_radps) to apply at ``now_s``: (0, 0) when stopped for any reason."""
@@ -202,10 +248,7 @@ class CommandFilter:
         return True
 
     def _take(self, cmd: Command, now_s: float) -> None:
-        if cmd.e_stop and cmd.source not in self._e_stop_sources:
-            log.warning("car %d: E-STOP latched by source %d (seq %d)", self.car_id, cmd.source, cmd.seq)
-            self._e_stop_sources.add(cmd.source)
-        elif not cmd.e_stop and cmd.source in self._e_stop_sources:
+        if cmd.release and cmd.source in self._e_stop_sources:  # rule 7
             log.warning("car %d: E-STOP released by source %d (seq %d)", self.car_id, cmd.source, cmd.seq)
             self._e_stop_sources.discard(cmd.source)
         self._last = cmd

@@ -198,14 +198,48 @@ function renderCars(cars) {
     const clock = c.clock_offset_ms === null || c.clock_offset_ms === undefined ? "–"
       : `${c.clock_offset_ms >= 0 ? "+" : ""}${c.clock_offset_ms.toFixed(0)}`;
     for (const v of [c.id, c.at_goal ? "arrived" : (c.state ?? "–"), c.replan_ms ?? "–", rate("plan"), rate("pose"),
-                     rate("trust"), clock, c.last_heard_s === null ? "never" : `${c.last_heard_s.toFixed(1)} s ago`]) {
+                     rate("trust"), clock, c.last_heard_s === null ? "never" : `${c.last_heard_s.toFixed(1)} s ago`,
+                     outcomes(c.outcomes)]) {
       tr.insertCell().textContent = v;
     }
     return tr;
   }));
 }
 
+function outcomes(o) {
+  if (!o) return "–";
+  return `${o.first}/${o.retry}/${o.fallback} · ${o.deadlocks}`;
+}
+
+// Operator mode (trustfg dashboard --operator): the session's token comes with the page's
+// address (?token=...), is kept for this tab only and sent with every button press.
+const params = new URLSearchParams(location.search);
+if (params.has("token")) {
+  sessionStorage.setItem("trustfg-token", params.get("token"));
+  history.replaceState(null, "", location.pathname);  // not left in the address bar or history
+}
+
+async function operate(action) {
+  const status = document.getElementById("operator-status");
+  try {
+    const response = await fetch("/api/operator", {
+      method: "POST", headers: {"Content-Type": "application/json",
+                                "Authorization": `Bearer ${sessionStorage.getItem("trustfg-token") || ""}`},
+      body: JSON.stringify({action, cars: []})});
+    const answer = await response.json();
+    status.textContent = answer.ok ? answer.did : `refused: ${answer.error}`;
+    status.dataset.result = answer.ok ? "ok" : "refused";
+  } catch (error) {
+    status.textContent = `failed: ${error}`;
+    status.dataset.result = "failed";
+  }
+}
+for (const action of ["estop", "release", "abort"]) {
+  document.getElementById(action).addEventListener("click", () => operate(action));
+}
+
 function renderSource(src) {
+  document.getElementById("operator").hidden = !(src.operator && src.operator.enabled);
   document.getElementById("mode").textContent = src.mode === "replay" ? "replay" : `live · ${(src.alive || []).length} alive`;
   const box = document.getElementById("replay");
   box.hidden = src.mode !== "replay";

@@ -1,5 +1,6 @@
 """The fleet bus on real Zenoh sessions over loopback TCP, multicast scouting off."""
 
+import json
 import time
 
 import numpy as np
@@ -9,7 +10,7 @@ from tests.conftest import free_tcp_port, free_udp_port, wait_for
 from trustfg.agent import messages
 from trustfg.agent.config import BusConfig
 from trustfg.agent.gp import Plan
-from trustfg.fleet.bus import BusError, FleetBus
+from trustfg.fleet.bus import BusError, FleetBus, zenoh_config
 from trustfg.fleet.keys import parse_key
 
 FLEET = "t"
@@ -24,7 +25,8 @@ def pose(sender, seq):
 
 
 @pytest.mark.parametrize("key, parsed", [
-    ("trustfg/t/3/plan", (3, "plan")), ("trustfg/t/start", (0, "start")),
+    ("trustfg/t/3/plan", (3, "plan")), ("trustfg/t/start", (0, "start")), ("trustfg/t/stop", (0, "stop")),
+    ("trustfg/t/heartbeat", (0, "heartbeat")), ("trustfg/t/2/clock", (2, "clock")), ("trustfg/t/truth", None),
     ("trustfg/t/0/plan", None), ("trustfg/t/256/plan", None), ("trustfg/t/03/plan", None),
     ("trustfg/u/3/plan", None), ("trustfg/t/3/teleport", None), ("trustfg/t/3/plan/x", None),
 ])
@@ -117,3 +119,35 @@ def test_bad_zenoh_settings_are_a_clear_error(tmp_path):
     bad.write_text("{ this is not json5 ")
     with pytest.raises(BusError, match="bad Zenoh configuration"):
         FleetBus(BusConfig(zenoh_config=str(bad)), FLEET, 1).open()
+
+
+def test_a_zenoh_config_file_is_completed_by_bus_values_and_a_contradiction_is_an_error(tmp_path):
+    base = tmp_path / "base.json5"
+    base.write_text('{ mode: "client", connect: { endpoints: ["tcp/10.0.0.2:7447"] } }')
+    config = zenoh_config(BusConfig(connect=("tcp/10.0.0.3:7447",), zenoh_config=str(base)), ("tcp/127.0.0.1:7450",))
+    assert json.loads(config.get_json("mode")) == "client"  # [bus] left mode at its default: the file's
+    assert json.loads(config.get_json("connect/endpoints")) == ["tcp/10.0.0.2:7447", "tcp/10.0.0.3:7447"]
+    assert json.loads(config.get_json("listen/endpoints")) == ["tcp/127.0.0.1:7450"]
+    with pytest.raises(BusError, match="bus.multicast_scouting = True contradicts"):
+        base.write_text('{ scouting: { multicast: { enabled: false } } }')
+        zenoh_config(BusConfig(multicast_scouting=True, zenoh_config=str(base)))
+    without_file = zenoh_config(BusConfig(mode="client"))
+    assert json.loads(without_file.get_json("mode")) == "client"
+
+
+def test_a_car_answers_the_operators_clock_query():
+    a = endpoint()
+    with FleetBus(BusConfig(listen=(a,)), FLEET, 4, clock=lambda: time.time() + 5.0) as car, \
+            FleetBus(BusConfig(listen=(endpoint(),), connect=(a,)), FLEET, None) as operator:
+        assert wait_for(lambda: operator.alive.get(4), 5.0)
+        answer = operator.query_clocks(4, timeout_s=2.0)
+        assert answer is not None
+        sent, theirs, received = answer
+        assert sent <= received and abs(theirs - (sent + received) / 2 - 5.0) < 0.05
+        assert operator.query_clocks(9, timeout_s=0.2) is None  # no such car: nobody answers
+        assert car.counters["clock_queries"] == 1
+
+
+def test_a_listen_endpoint_on_port_0_is_refused():
+    with pytest.raises(BusError, match="port 0"):
+        zenoh_config(BusConfig(listen=("tcp/127.0.0.1:0",)))

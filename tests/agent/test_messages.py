@@ -33,7 +33,12 @@ def samples():
         TrustReport(3, 7, 12.5, {1: PeerTrust((1.0, 2.0, 3.0), (0.0, 0.5, 9.0), (0.9, 0.8, 0.3), 0.3, 0.9),
                                  4: PeerTrust((5.0,) * 3, (0.0,) * 3, (0.97,) * 3, 0.97, 0.45)}),
         PoseMessage(4, 99, 13.0, 0.4, -2.15, 1.5708, True),
-        StatusMessage(1, 3, 14.0, "driving", 4.2, 5, False, {"plans_rejected": 2, "replans": 40}),
+        StatusMessage(1, 3, 14.0, "driving", 4.2, 5, False, {"plans_rejected": 2, "replans": 40}, 7),
+        messages.StartMessage(messages.operator_seq(15.0), 15.0, 3, {1: (17.0, 0.4), 2: (17.5, 0.35)}),
+        messages.StopMessage(messages.operator_seq(16.0), 16.0, "estop", (1, 3)),
+        messages.StopMessage(messages.operator_seq(16.5), 16.5, "abort", (), 3),
+        messages.HeartbeatMessage(messages.operator_seq(17.0), 17.0),
+        messages.ClockMessage(2, 0, 18.25),
     ]
 
 
@@ -127,8 +132,9 @@ def test_mutated_messages_only_ever_raise_message_error(payload, data):
         message = decode(bytes(raw))
     except MessageError:
         return
-    # Whatever decodes is fully valid: finite numbers, sane ids.
-    assert 1 <= message.sender <= 255 and math.isfinite(message.stamp)
+    # Whatever decodes is fully valid: finite numbers, sane ids (0: the operator's kinds only).
+    low = 0 if message.kind in messages.OPERATOR_KINDS else 1
+    assert low <= message.sender <= 255 and math.isfinite(message.stamp)
 
 
 def test_inbox_drops_spoofed_replayed_and_out_of_order():
@@ -152,3 +158,29 @@ def test_inbox_accepts_a_restarted_sender():
     assert inbox.accept(encode(restarted)) is not None
     # ... but an old message with a small sequence number is still a replay.
     assert inbox.accept(encode(PlanMessage(2, 0, late.stamp - 1.0, late.plan, late.goal))) is None
+
+
+@pytest.mark.parametrize("message, changes, reason", [
+    (messages.StopMessage(1, 1.0, "estop"), dict(action="launch"), "stop.action"),
+    (messages.StopMessage(1, 1.0, "estop"), dict(cars=[0]), "stop.cars"),
+    (messages.StopMessage(1, 1.0, "estop"), dict(cars="all"), "stop.cars"),
+    (messages.StopMessage(1, 1.0, "estop"), dict(id=3), "id"),
+    (messages.StartMessage(1, 1.0, 2, {1: (2.0, 0.4)}), dict(trial=0), "trial"),
+    (messages.StartMessage(1, 1.0, 2, {1: (2.0, 0.4)}), dict(trial=...), "missing"),
+    (messages.HeartbeatMessage(1, 1.0), dict(extra=1), "unexpected"),
+    (messages.ClockMessage(2, 0, 1.0), dict(id=0), "id"),
+])
+def test_operator_messages_are_checked(message, changes, reason):
+    with pytest.raises(MessageError, match=reason):
+        decode(mutate(message, **changes))
+
+
+def test_operator_messages_from_several_processes_share_one_order():
+    """Two operator processes (trustfg stop, the dashboard) number by their stamps: the
+    later stop wins whichever process sent it, and an old one replayed is dropped."""
+    inbox = Inbox()
+    first = messages.StopMessage(messages.operator_seq(100.0), 100.0, "estop")
+    second = messages.StopMessage(messages.operator_seq(100.5), 100.5, "release")
+    assert inbox.accept(encode(first), key_sender=0) == first
+    assert inbox.accept(encode(second), key_sender=0) == second
+    assert inbox.accept(encode(first), key_sender=0) is None and inbox.dropped["out_of_order"] == 1

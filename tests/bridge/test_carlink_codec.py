@@ -82,7 +82,8 @@ def test_layout_offsets():
     (forge(omega=float("-inf")), "non_finite"),
     (forge(omega=float("nan")), "non_finite"),
     (forge(stamp_s=float("nan")), "non_finite"),
-    (forge(flags=0x0004), "flags"),
+    (forge(flags=0x0010), "flags"),
+    (forge(flags=0x0005), "flags"),  # E_STOP with RELEASE
     (forge(flags=0x8001), "flags"),
 ], ids=lambda x: x if isinstance(x, str) else None)
 def test_decode_rejects_with_reason(data, reason):
@@ -111,7 +112,8 @@ def test_decode_accepts_bytearray_and_memoryview():
     (dict(v_mps=float("nan")), "non_finite"),
     (dict(omega_radps=1e39), "range"),
     (dict(stamp_s=float("inf")), "non_finite"),
-    (dict(flags=4), "flags"),
+    (dict(flags=16), "flags"),
+    (dict(flags=5), "flags"),
     (dict(car_id=1.5), "type"),
     (dict(v_mps="fast"), "type"),
 ])

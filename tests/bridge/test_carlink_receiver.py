@@ -105,24 +105,61 @@ def test_stop_holds_still_without_latching():
     assert f.active_command(0.03) == (0.5, 0.25)
 
 
-def test_e_stop_latches_until_a_command_without_it():
+def test_e_stop_latches_until_a_release():
     f = CommandFilter(CAR)
     f.accept(datagram(1, v=0.5), 0.0)
     f.accept(datagram(2, v=0.5, flags=Flags.E_STOP), 0.02)
     assert f.e_stop_latched and f.active_command(0.03) == (0.0, 0.0)
     f.accept(datagram(3, v=0.5, flags=Flags.E_STOP), 0.04)
     assert f.active_command(0.05) == (0.0, 0.0)
-    # nothing short of an accepted command without E_STOP releases it
-    f.accept(datagram(2, v=0.5), 0.06)  # stale
-    f.accept(datagram(4, car_id=CAR + 1, v=0.5), 0.07)  # other car
-    f.accept(forge(seq=4, flags=0, crc=0), 0.08)  # corrupted
-    assert f.e_stop_latched and f.active_command(0.09) == (0.0, 0.0)
-    assert f.active_command(100.0) == (0.0, 0.0) and f.e_stop_latched  # silence neither
-    # released by STOP without E_STOP, but STOP still holds the car
-    f.accept(datagram(4, v=0.5, flags=Flags.STOP), 100.0)
+    # nothing short of an accepted RELEASE releases it: not ordinary commands in sequence
+    # (a car process that never heard of the e-stop keeps driving), not stale, foreign or
+    # corrupted releases, not silence
+    for seq in range(2, 60):
+        assert f.accept(datagram(seq, v=0.5), 0.06 + 0.02 * seq) is not None
+    f.accept(datagram(40, v=0.5, flags=Flags.RELEASE), 1.3)  # stale
+    f.accept(datagram(60, car_id=CAR + 1, v=0.5, flags=Flags.RELEASE), 1.3)  # other car
+    f.accept(forge(seq=60, flags=int(Flags.RELEASE), crc=0), 1.3)  # corrupted
+    assert f.e_stop_latched and f.active_command(1.31) == (0.0, 0.0)
+    assert f.active_command(100.0) == (0.0, 0.0) and f.e_stop_latched
+    # released by RELEASE|STOP in sequence, but STOP still holds the car
+    f.accept(datagram(60, v=0.5, flags=Flags.RELEASE | Flags.STOP), 100.0)
     assert not f.e_stop_latched and f.active_command(100.01) == (0.0, 0.0)
-    f.accept(datagram(5, v=0.5), 100.02)
+    f.accept(datagram(61, v=0.5), 100.02)
     assert f.active_command(100.03) == (0.5, 0.25)
+
+
+def test_an_e_stop_from_a_second_sender_latches_out_of_sequence_and_leaves_the_stream_alone():
+    """The operator's e-stop, straight to the car: its numbers are not the car process's."""
+    f = CommandFilter(CAR)
+    for seq in range(1000, 1010):
+        f.accept(datagram(seq, v=0.5), 0.02 * (seq - 1000))
+    operator = datagram(7, v=0.0, flags=Flags.E_STOP | Flags.STOP | Flags.PING)  # 'old' number
+    assert f.accept(operator, 0.2) is not None
+    assert f.e_stop_latched and f.active_command(0.2) == (0.0, 0.0)
+    assert f.counters.e_stops == 1 and f.counters.stale_seq == 0
+    # the car process's stream goes on in sequence (no resync hiccup), and the car holds
+    assert f.accept(datagram(1010, v=0.5), 0.22) is not None
+    assert f.last_command.seq == 1010 and f.active_command(0.23) == (0.0, 0.0)
+    # an operator's e-stop numbered 'ahead' of the stream does not move the reference either
+    f.accept(datagram(1010 + 2**20, v=0.0, flags=Flags.E_STOP), 0.24)
+    assert f.accept(datagram(1011, v=0.5, flags=Flags.RELEASE), 0.26) is not None
+    assert not f.e_stop_latched and f.active_command(0.27) == (0.5, 0.25)
+
+
+def test_a_ping_is_answered_and_never_applied():
+    f = CommandFilter(CAR)
+    f.accept(datagram(100, v=0.5), 0.0)
+    ping = f.accept(datagram(5, v=0.9, flags=Flags.PING, stamp_s=12.5), 0.01)
+    assert ping is not None and ping.ping
+    assert f.active_command(0.02) == (0.5, 0.25) and f.last_command.seq == 100
+    answer = f.answer(ping, 0.02)
+    assert (answer.car_id, answer.seq, answer.stamp_s) == (CAR, 5, 12.5)
+    assert not answer.e_stop_latched and not answer.stopped
+    assert f.answer(ping, 0.3).stopped  # the watchdog has stopped it by then
+    f.accept(datagram(6, flags=Flags.E_STOP | Flags.PING), 0.31)
+    assert f.answer(ping, 0.31).e_stop_latched
+    assert f.counters.pings == 2 and f.counters.accepted == 1
 
 
 def test_restarted_sender_is_resynced_after_silence():

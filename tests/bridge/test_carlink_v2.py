@@ -115,20 +115,41 @@ def test_a_version_2_car_refuses_version_1_datagrams():
     assert car.counters.decode_errors == {"length": 1}
 
 
-def test_sources_have_sessions_of_their_own_and_only_the_setter_releases_an_e_stop():
+def test_sources_have_sessions_of_their_own_and_only_the_setters_release_clears_its_e_stop():
     key = new_key()
     car = CommandFilter(CAR, key=key)
     assert car.accept(v2(key, 0, session=100, v=0.4), 0.00)
-    # the operator (started earlier: a smaller session) latches an e-stop
+    # the operator latches an e-stop
     assert car.accept(v2(key, 0, session=50, source=SOURCE_OPERATOR, flags=Flags.E_STOP), 0.01)
     assert car.e_stop_latched and car.active_command(0.02) == (0.0, 0.0)
-    # the car process goes on commanding: it cannot release the operator's e-stop
+    # the car process goes on commanding, even with RELEASE: it cannot release the operator's e-stop
     assert car.accept(v2(key, 1, session=100, v=0.4), 0.03)
+    assert car.accept(v2(key, 2, session=100, flags=Flags.STOP | Flags.RELEASE, v=0.0), 0.035)
     assert car.e_stop_latched and car.active_command(0.04) == (0.0, 0.0)
-    # the operator releases it
-    assert car.accept(v2(key, 1, session=50, source=SOURCE_OPERATOR, v=0.0), 0.05)
-    assert car.accept(v2(key, 2, session=100, v=0.4), 0.06)
+    # nor does the operator's own ordinary datagram or PING: only its RELEASE
+    assert car.accept(v2(key, 1, session=50, source=SOURCE_OPERATOR, flags=Flags.STOP, v=0.0), 0.045)
+    assert car.accept(v2(key, 2, session=50, source=SOURCE_OPERATOR, flags=Flags.PING, v=0.0), 0.046)
+    assert car.e_stop_latched
+    assert car.accept(v2(key, 3, session=50, source=SOURCE_OPERATOR, flags=Flags.STOP | Flags.RELEASE, v=0.0), 0.05)
+    assert car.accept(v2(key, 3, session=100, v=0.4), 0.06)
     assert not car.e_stop_latched and car.active_command(0.07) == pytest.approx((0.4, -0.5))
+
+
+def test_an_e_stop_latches_from_an_older_session_but_a_release_must_be_in_the_newest():
+    """Rule 2 against rule 4: two tools of the operator's (the dashboard started first,
+    trustfg stop later) -- the older one's e-stop still stops the car; a RELEASE of an old
+    session (a replay, or the older tool) does not release it."""
+    key = new_key()
+    car = CommandFilter(CAR, key=key)
+    assert car.accept(v2(key, 0, session=100, v=0.4), 0.00)
+    assert car.accept(v2(key, 0, session=70, source=SOURCE_OPERATOR, flags=Flags.STOP | Flags.PING), 0.01)
+    assert car.accept(v2(key, 1, session=70, source=SOURCE_OPERATOR, flags=Flags.STOP), 0.01)  # session 70 is newest
+    assert car.accept(v2(key, 5, session=60, source=SOURCE_OPERATOR, flags=Flags.E_STOP), 0.02)  # older: still latches
+    assert car.e_stop_latched and car.counters.e_stops == 1
+    assert car.accept(v2(key, 6, session=60, source=SOURCE_OPERATOR, flags=Flags.RELEASE, v=0.0), 0.03) is None
+    assert car.e_stop_latched and car.counters.old_session == 1
+    assert car.accept(v2(key, 0, session=80, source=SOURCE_OPERATOR, flags=Flags.STOP | Flags.RELEASE, v=0.0), 0.04)
+    assert not car.e_stop_latched
 
 
 KEY = bytes(range(100, 132))

@@ -104,6 +104,9 @@ def test_the_bank_command_writes_results_and_carries_on_after_a_stop(tmp_path):
         assert run["outcome"] != "success" or run["arrived"] == 4
     pooled = next(c for c in report["summary"] if c["scene"].startswith("all") and c["method"] == "orca")
     assert pooled["runs"] == 4 and sum(rate[0] for rate in pooled["rates"].values()) == pytest.approx(1.0)
+    assert pooled["plans"]["retry_share"] is None  # ORCA makes no plans
+    fixed = next(c for c in report["summary"] if c["scene"].startswith("all") and c["method"] == "fixed")
+    assert fixed["plans"]["first"] > 0 and fixed["plans"]["unverified"] == 0  # the planner runs verified
 
     journal = (tmp_path / "runs.jsonl").read_text()
     again = _bank(*args)

@@ -57,7 +57,7 @@ def test_car_process_stops_without_pose_drives_after_start_and_stops_on_sigterm(
             assert link.last_command.stop
             assert wait_for(lambda: bus.alive.get(car.id), 10.0)
             # After the start it drives: a non-zero speed command.
-            go = messages.StartMessage(1, time.time(), {car.id: (time.time() + 0.2, 0.4)})
+            go = messages.StartMessage(1, time.time(), 1, {car.id: (time.time() + 0.2, 0.4)})
             bus.publish("start", messages.encode(go))
             assert wait_for(lambda: link.last_command and link.last_command.v_mps > 0.05, 10.0)
             # Its own pose lost (tracking invalid): it commands STOP within the pose timeout.
@@ -79,7 +79,8 @@ def test_car_process_stops_without_pose_drives_after_start_and_stops_on_sigterm(
             process.stderr.close()
     summary = json.loads(stats.read_text())
     assert summary["control"]["stale_pose_stops"] > 0
-    assert summary["control"]["sent"] > 50
+    assert summary["control"]["sent"] > 20 and summary["control"]["rate_hz"] > 25  # 50 Hz from its first moment (loaded: fewer)
+    assert summary["agent"].get("plans_first", 0) > 0  # its replans were verified (agent.safe_plan)
 
 
 def test_a_car_with_another_key_hears_nothing_from_the_car_process(one_car, tmp_path):

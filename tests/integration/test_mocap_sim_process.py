@@ -33,6 +33,8 @@ def start_mocap(path, truth, *extra):
     process = subprocess.Popen([sys.executable, "-m", "trustfg", "mocap-sim", "--config", str(path),
                                 "--ground-truth", str(truth), *extra],
                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    ports = process.stdout.readline()
+    assert ports.startswith("mocap-sim: NatNet on "), process.stderr.read()  # the ports it bound
     line = process.stdout.readline()
     assert line.strip() == "READY", process.stderr.read()
     return process

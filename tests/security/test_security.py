@@ -66,7 +66,7 @@ def test_a_session_without_a_valid_certificate_can_neither_receive_nor_publish(c
         for name, config in [
             ("no certificate", {"transport": {"link": {"tls": {"root_ca_certificate": str(certs / "ca.pem"),
                                                                 "verify_name_on_connect": False}}}}),
-            ("a foreign CA", secure_config(FLEET, CARS, stranger_certs, "car9")),
+            ("a foreign CA", secure_config(FLEET, [9], stranger_certs, "car9")),
         ]:
             bus_config = BusConfig(connect=(a,), zenoh_config=write(config, tmp_path / "x.json5"))
             session = zenoh.open(zenoh_config(bus_config))
@@ -107,13 +107,17 @@ def test_car_2_cannot_publish_under_car_1s_keys(certs, tmp_path):
                 time.sleep(0.05)
             assert any(r.sender == 2 and r.kind == "pose" for r in heard), "car 2's own keys must get through"
             assert not any(r.payload == b"car 2 pretending to be car 1" for r in heard)
-            # ... and only the operator may start the fleet. Same session, same link, same
-            # priority: had the start got through, it would arrive before the marker after it.
-            raw.put(f"trustfg/{FLEET}/start", b"car 2 starting the fleet")
+            # ... and only the operator may start, stop or keep the fleet alive. Same session,
+            # same link, same priority: had one got through, it would arrive before the marker.
+            for name in ("start", "stop", "heartbeat"):
+                raw.put(f"trustfg/{FLEET}/{name}", f"car 2 sending the operator's {name}".encode())
             honest.put(b"marker")
             later = []
             assert wait_for(lambda: (later.extend(one.drain()), any(r.payload == b"marker" for r in later))[1], 10.0)
-            assert not any(r.kind == "start" for r in later)
+            assert not any(r.kind in ("start", "stop", "heartbeat") for r in later)
+            # while the operator's own stop does reach car 1
+            observer.publish("stop", messages.encode(messages.StopMessage(1, time.time(), "estop")))
+            assert wait_for(lambda: (later.extend(one.drain()), any(r.kind == "stop" for r in later))[1], 10.0)
         finally:
             raw.close()
 
@@ -136,3 +140,14 @@ def test_without_access_control_the_spoof_would_get_through(certs, tmp_path):
                                      any(r.payload == b"car 2 pretending to be car 1" for r in heard))[2], 10.0)
         finally:
             raw.close()
+
+
+def test_secure_config_refuses_an_identity_outside_the_fleet_and_writes_where_certificates_will_be(certs):
+    with pytest.raises(ValueError, match="car9"):
+        secure_config(FLEET, CARS, certs, "car9")
+    config = secure_config(FLEET, CARS, certs, "car2", certs_at="/etc/trustfg/tls")
+    tls = config["transport"]["link"]["tls"]
+    assert tls["root_ca_certificate"] == "/etc/trustfg/tls/ca.pem"
+    assert tls["connect_certificate"] == "/etc/trustfg/tls/car2.pem"
+    with pytest.raises(FileNotFoundError, match="car3"):
+        secure_config(FLEET, [1, 2, 3], certs, "car3")

@@ -1,0 +1,195 @@
+"""Deadlocks: detected from what a car sees, resolved by a priority rule (decentralised).
+
+Verified plans and the fallback make a car stop rather than risk a breach; cars that stop
+for one another can stop for good -- two in a corridor nose to nose, a ring of cars round
+a pillar, each waiting for the next. Each car watches for it on its own, from the poses
+it observes and the plans it hears, at every replan:
+
+    stalled     a car that has come less than ``progress_m`` nearer its goal over the
+                last ``window_s`` (judged on positions sampled at the replans; for a peer
+                whose goal we have not heard, one that has moved less than that): a car
+                that stands, and one that wanders about without getting anywhere
+    group       the peers within ``group_radius_m`` and those our last plans failed
+                verification against (in our way, on our goal say, however far), but
+                for those at their goals (as their plan messages name them) or waiting
+                for their departure
+    deadlock    we are stalled (departed, not at our goal, not giving way already), the
+                group is not empty and every car in it is stalled too: were one of them
+                getting somewhere, we would be waiting for it, not deadlocked
+
+Resolution, a yielding rule by priority: in the group, the car with the lowest id keeps
+going for its goal; every other member gives way -- for ``yield_s`` it plans to a detour
+goal ``detour_m`` away, in the free direction (walls, and the other cars as seen) most
+directly away from the ways of the members that go before it (the nearest point of
+their plans and goals), then heads for its goal again. Each
+car applies the same rule to nearly the same observations, so the group agrees on who
+goes first without a message; the one that goes first finds room as the others make
+it, and once it has left, the next in line goes first. Each detection counts one
+deadlock (``deadlocks``), each detour one yield (``deadlock_yields``).
+
+Pure: the caller passes the time and what its car sees.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .config import DeadlockConfig
+from .world import SignedDistanceField
+
+DETOUR_TURNS_DEG = (0.0, 45.0, -45.0, 90.0, -90.0, 135.0, -135.0)
+"""Directions a detour tries, turned from straight away from the cars that go first."""
+SEGMENT_SAMPLES = 12
+SEEN_S = 0.5
+"""Cars seen within this long are what the watch goes by."""
+WAITING_S = 0.05
+"""A peer whose latest plan starts this much after it was sent has not departed yet."""
+WAY_SAMPLES = 20
+
+
+@dataclass(frozen=True)
+class PeerSeen:
+    """What the watch needs of a peer: where it is, and whether it may stand still."""
+
+    position: np.ndarray
+    at_goal: bool = False
+    waiting: bool = False
+    """Not departed yet (its plan starts in the future)."""
+    goal: np.ndarray | None = None
+    """Its goal, as its plan messages name it (None: not heard yet)."""
+    way: np.ndarray | None = None
+    """Points (k, 2) of where it means to go (its plan, its goal); a car that gives way to
+    it moves away from the nearest of them."""
+
+
+@dataclass
+class Detour:
+    goal: np.ndarray
+    until: float
+
+
+@dataclass
+class DeadlockWatch:
+    car_id: int
+    config: DeadlockConfig
+    history: deque = field(default_factory=deque)
+    """(t, {car id: position}) at the replans of the last window."""
+    detour: Detour | None = None
+    deadlocked: bool = False
+    deadlocks: int = 0
+    yields: int = 0
+
+    def goal(self, now: float, position: np.ndarray, goal: np.ndarray, peers: dict[int, PeerSeen], departed: bool,
+             keep_clear: float, sdf: SignedDistanceField, wall_clear: float,
+             blockers: frozenset[int] = frozenset()) -> np.ndarray | None:
+        """Record what we see now; the detour goal to plan to while we give way, else None.
+
+        ``blockers``: peers our last plans failed verification against (they belong to
+        our group however far away, like a car that stands on our goal);
+        ``keep_clear``: how far a detour goal must stay from every car we see (centres);
+        ``wall_clear``: from every wall (centre to surface), along the way there too."""
+        if self.detour is not None:
+            if now < self.detour.until:
+                return self.detour.goal
+            self.detour = None
+            self.history.clear()  # a fresh window before the next detection
+        self.history.append((now, {self.car_id: (np.asarray(position, float), np.asarray(goal, float))}
+                             | {cid: (p.position, p.goal) for cid, p in peers.items()}))
+        while self.history and self.history[0][0] < now - self.config.window_s - 1e-9:
+            self.history.popleft()
+        group = self.group(now, peers, blockers) if departed else []
+        if not group:
+            self.deadlocked = False
+            return None
+        if not self.deadlocked:
+            self.deadlocked = True
+            self.deadlocks += 1
+        first = [cid for cid in group if cid < self.car_id]
+        if not first or not self.config.enabled:
+            return None  # we go first (or resolution is off): keep trying for the goal
+        goal = detour_goal(position, [_way(peers[cid]) for cid in first],
+                           [p.position for p in peers.values()], self.config.detour_m, keep_clear, sdf, wall_clear)
+        if goal is None:
+            return None
+        self.detour = Detour(goal, now + self.config.yield_s)
+        self.deadlocked = False
+        self.yields += 1
+        return goal
+
+    def group(self, now: float, peers: dict[int, PeerSeen], blockers: frozenset[int] = frozenset()) -> list[int]:
+        """The peers near us or in our way (not at their goals, not waiting to depart),
+        when we and every one of them are stalled -- if one of them is getting somewhere,
+        we are waiting for it, not deadlocked (else empty)."""
+        if not self.stalled(self.car_id, now):
+            return []
+        here = self.history[-1][1][self.car_id][0]
+        near = [cid for cid, p in peers.items() if not (p.at_goal or p.waiting)
+                and (cid in blockers or np.linalg.norm(p.position - here) <= self.config.group_radius_m)]
+        if not all(self.stalled(cid, now) for cid in near):
+            return []
+        return sorted(near)
+
+    def stalled(self, car_id: int, now: float) -> bool:
+        """Came less than progress_m nearer its goal over a whole window (moved less than
+        that, for a car whose goal we do not know), seen at every sample of it."""
+        if not self.history or self.history[0][0] > now - self.config.window_s + 0.25:
+            return False
+        track = [seen.get(car_id) for _, seen in self.history]
+        if any(entry is None for entry in track):
+            return False
+        (first, goal), (latest, latest_goal) = track[0], track[-1]
+        if goal is not None and latest_goal is not None and np.array_equal(goal, latest_goal):
+            progress = float(np.linalg.norm(first - goal) - np.linalg.norm(latest - goal))
+            return progress < self.config.progress_m
+        return max(float(np.linalg.norm(p - latest)) for p, _ in track) < self.config.progress_m
+
+
+def peers_seen(tracks: dict, views: dict, own_id: int, now: float, arrival_radius_m: float) -> dict[int, PeerSeen]:
+    """What the watch needs of every car we saw lately (``tracks``: agent.track.Track by
+    id), with what we heard from it (``views``: agent.evidence.PeerView by id)."""
+    seen = {}
+    for car_id, track in tracks.items():
+        motion = track.motion()
+        if car_id == own_id or motion is None or now - motion.stamp > SEEN_S:
+            continue
+        view = views.get(car_id)
+        goal = None if view is None or view.goal is None else np.asarray(view.goal, float)
+        at_goal = goal is not None and float(np.linalg.norm(motion.position - goal)) <= arrival_radius_m
+        waiting = bool(view and view.latest is not None and view.latest.plan.t0 > view.latest.stamp + WAITING_S)
+        way = None
+        if view is not None and view.accepted is not None:
+            way = view.accepted.position_at(np.linspace(now, max(now, view.accepted.t_end), WAY_SAMPLES))
+            way = way if goal is None else np.vstack([way, goal])
+        seen[car_id] = PeerSeen(motion.position, at_goal, waiting, goal, way)
+    return seen
+
+
+def _way(peer: PeerSeen) -> np.ndarray:
+    """Where the peer is and means to go: its position, then its way (k, 2)."""
+    return peer.position[None, :] if peer.way is None else np.vstack([peer.position, peer.way])
+
+
+def detour_goal(position: np.ndarray, ways: list[np.ndarray], everyone: list[np.ndarray], distance: float,
+                keep_clear: float, sdf: SignedDistanceField, wall_clear: float) -> np.ndarray | None:
+    """A point ``distance`` from ``position`` as directly away from the nearest points of
+    ``ways`` (of the cars that go first) as walls and cars allow, and ``keep_clear`` off
+    those ways and every car seen; None when every direction tried is blocked."""
+    position = np.asarray(position, float)
+    nearest = [way[int(np.argmin(np.linalg.norm(way - position, axis=1)))] for way in ways]
+    away = sum(((position - p) / max(float(np.linalg.norm(position - p)), 1e-6) for p in nearest), np.zeros(2))
+    base = math.atan2(away[1], away[0]) if np.linalg.norm(away) > 1e-6 else 0.0
+    avoid = np.vstack([*ways, *everyone]) if ways or everyone else np.zeros((0, 2))
+    for turn in DETOUR_TURNS_DEG:
+        angle = base + math.radians(turn)
+        goal = position + distance * np.array([math.cos(angle), math.sin(angle)])
+        way = position + np.linspace(0.0, 1.0, SEGMENT_SAMPLES)[1:, None] * (goal - position)
+        if np.min(sdf.distance(way)) < wall_clear:
+            continue
+        if len(avoid) and np.min(np.linalg.norm(avoid - goal, axis=1)) < keep_clear:
+            continue
+        return goal
+    return None

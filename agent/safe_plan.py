@@ -1,0 +1,200 @@
+"""One replan made safe: optimise, verify, try other starting guesses, else brake.
+
+Every plan the optimiser returns is verified (agent.verify) before the car uses or
+publishes it. A plan that fails is not executed; the planner tries again from other
+starting guesses, cheapest first, until one verifies, ``VerifyConfig.max_attempts``
+plans have been tried, or (in the car process) ``budget_ms`` of wall time has passed:
+
+    tighten     the failed plan as the warm start, with every epsilon it broke raised by
+                how far it broke it: a hinge that presses settles inside its epsilon
+                (a soft factor's equilibrium), so asking for a little more lands the plan
+                where the check wants it. Cheap: a few LM iterations.
+    other side  the failed plan pushed, around the time of its first conflict, to the
+                other side of the peer it conflicts with (a smooth bump, mirrored through
+                the peer's position), or out of the wall it cuts: LM from there finds the
+                pass the warm start could not reach (a warm-started plan never flips sides
+                on its own, and a route through the middle of a pillar feels no push to
+                either side).
+    slower      a later arrival (the horizon half as long again), cold: the car lets the
+                others through first; with the lingering paces of the cold start this
+                includes waiting in place.
+    cold        the planner's cold start (the route at several paces, the cheapest first).
+
+A plan that breaks only the vehicle's limits tries ``slower`` first.
+
+When nothing verifies, the car commits to the fallback (agent.fallback): a braking
+trajectory along its last verified plan that stops short of everything it knows of (or
+that plan itself while it is still clear), published as its plan so that its peers plan
+around a car that stops. Counting the outcomes (first try, retry, fallback) per car is
+the caller's job (agent.car_agent).
+
+Pure: the wall clock is passed in (None in the in-process fleet, which runs on simulated
+time and counts attempts only, so a run stays exactly repeatable from its seed).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from .config import PlannerConfig, VerifyConfig
+from .fallback import fallback
+from .gp import Plan
+from .planner import PeerConstraint, PlanningError, PlanRequest, PlanResult, plan_trajectory
+from .verify import Bounds, Conflict, Verdict, verify
+from .world import SignedDistanceField
+
+FIRST, RETRY, FALLBACK, UNVERIFIED = "first", "retry", "fallback", "unverified"
+"""Outcomes of a replan (counted per car as ``plans_<outcome>``)."""
+SLOWER_HORIZON = 1.5
+"""The ``slower`` alternative's horizon, as a multiple of the failed one."""
+BUMP_WIDTH_S = 1.0
+"""Standard deviation in time of the ``other side`` displacement."""
+SIDE_CLEAR_M = 0.02
+"""A plan this close to a peer's track goes round it on the left."""
+OBSTACLE_PUSH_M = 0.05
+"""``other side`` of a wall pushes this much further out than the plan lacks."""
+TIGHTEN_PAD = 1.25
+"""``tighten`` raises a broken epsilon by this times how far it was broken."""
+
+
+@dataclass(frozen=True)
+class Outcome:
+    plan: Plan
+    outcome: str
+    """FIRST, RETRY, FALLBACK or UNVERIFIED (verification switched off)."""
+    result: PlanResult
+    """The optimiser's result behind ``plan`` (for a fallback: the last one tried, with
+    the braking plan in it); ``time_ms`` is the whole replan's, checks included."""
+    verdict: Verdict | None
+    """The check of ``plan`` (a fallback is checked too, for the record)."""
+    tried: tuple[str, ...]
+    """The starting guesses tried, in order."""
+    blocked_by: tuple[int, ...] = ()
+    """Peers (indices of ``request.peers``; ids once the agent has them) that a plan of
+    this replan failed verification against."""
+
+
+def plan_safely(request: PlanRequest, bounds: Bounds, planner: PlannerConfig, config: VerifyConfig,
+                sdf: SignedDistanceField, last_verified: Plan | None,
+                clock: Callable[[], float] | None = None) -> Outcome:
+    """Plan, verify, retry, else brake along ``last_verified``; raise PlanningError only
+    for a car state that is not finite."""
+    started = time.perf_counter()
+    if not (np.all(np.isfinite(request.position)) and np.all(np.isfinite(request.velocity))
+            and math.isfinite(request.t_now)):
+        raise PlanningError("the car's state must be finite")
+    if not config.enabled:
+        result = plan_trajectory(request, planner, sdf)
+        return Outcome(result.plan, UNVERIFIED, result, None, ("warm" if request.warm_start else "cold",))
+    tried: list[str] = []
+    blocked: set[int] = set()
+    last: PlanResult | None = None
+    name = "warm" if request.warm_start is not None else "cold"
+    attempt: PlanRequest | None = request
+    budget_start = clock() if clock else 0.0
+    retry_planner = dataclasses.replace(planner, max_iterations=min(planner.max_iterations, config.retry_iterations))
+    while attempt is not None:
+        tried.append(name)
+        try:
+            result = plan_trajectory(attempt, planner if len(tried) == 1 else retry_planner, sdf)
+        except PlanningError:
+            result = None
+        if result is not None:
+            last = result
+            verdict = verify(result.plan, request.peers, bounds, sdf, config)
+            if verdict.ok:
+                outcome = FIRST if len(tried) == 1 else RETRY
+                return Outcome(result.plan, outcome, _timed(result, started), verdict, tuple(tried),
+                               tuple(sorted(blocked)))
+            blocked.update(c.peer for c in verdict.conflicts if c.kind == "peer")
+        else:
+            verdict = None
+        if len(tried) >= config.max_attempts or (clock and (clock() - budget_start) * 1e3 > config.budget_ms):
+            break
+        name, attempt = _next_attempt(request, tried, last, verdict, sdf)
+    plan, verdict = fallback(last_verified, request, bounds, sdf, config)
+    base = last or PlanResult(plan, 0, math.nan, math.nan, 0.0, request.warm_start is not None)
+    return Outcome(plan, FALLBACK, _timed(dataclasses.replace(base, plan=plan), started), verdict, tuple(tried),
+                   tuple(sorted(blocked)))
+
+
+def _timed(result: PlanResult, started: float) -> PlanResult:
+    return dataclasses.replace(result, time_ms=(time.perf_counter() - started) * 1e3)
+
+
+def _next_attempt(request: PlanRequest, tried: list[str], failed: PlanResult | None,
+                  verdict: Verdict | None, sdf: SignedDistanceField) -> tuple[str, PlanRequest | None]:
+    """The next starting guess not tried yet, cheapest first (None: none left)."""
+    conflicts = verdict.conflicts if verdict else ()
+    distance = [c for c in conflicts if c.kind != "limits"]
+    limits_only = bool(conflicts) and not distance
+    order = ["slower", "cold"] if limits_only else ["tighten", "other side", "slower", "cold"]
+    for name in order:
+        if name in tried:
+            continue
+        if name == "tighten" and failed is not None and distance:
+            return name, tightened(request, failed.plan, distance)
+        if name == "other side" and failed is not None and distance:
+            return name, dataclasses.replace(request, warm_start=other_side(failed.plan, distance[0], request, sdf))
+        if name == "cold":
+            return name, dataclasses.replace(request, warm_start=None)
+        if name == "slower":
+            horizon = max(request.t_arrive - request.t_now, 0.0)
+            return name, dataclasses.replace(request, warm_start=None,
+                                             t_arrive=request.t_now + SLOWER_HORIZON * horizon)
+    return "", None
+
+
+def tightened(request: PlanRequest, failed: Plan, conflicts: list[Conflict]) -> PlanRequest:
+    """The request with every broken epsilon raised by TIGHTEN_PAD times how far it was
+    broken, warm-started from the failed plan."""
+    extra = {c.peer: c.excess for c in conflicts if c.kind == "peer"}
+    peers = tuple(PeerConstraint(p.plan, p.epsilon + TIGHTEN_PAD * extra[i]) if i in extra else p
+                  for i, p in enumerate(request.peers))
+    wall = max((c.excess for c in conflicts if c.kind == "obstacle"), default=0.0)
+    return dataclasses.replace(request, peers=peers, warm_start=failed,
+                               epsilon_obstacle=request.epsilon_obstacle + TIGHTEN_PAD * wall)
+
+
+def other_side(plan: Plan, conflict: Conflict, request: PlanRequest, sdf: SignedDistanceField) -> Plan:
+    """``plan`` displaced sideways around the time of ``conflict`` so that it passes on the
+    other side: of a peer, mirrored across the peer's track to the peer's epsilon (sideways
+    to the motion relative to it); of a wall, pushed out by what it lacks, to the side the
+    distance field rises (to the left where that is not clear, as in the middle of a
+    pillar a straight route crosses). Faded in and out with a Gaussian bump in time; the
+    start stays where the car is."""
+    p = np.array(conflict.position)
+    (v,) = plan.state_at(conflict.t)[1]
+    if conflict.kind == "peer":
+        q = np.array(conflict.other)
+        peer = request.peers[conflict.peer]
+        (w,) = peer.plan.state_at(conflict.t)[1]
+        relative = v - w
+    else:
+        relative = v
+    left = np.array([-relative[1], relative[0]])
+    left = left / np.linalg.norm(left) if np.linalg.norm(left) > 1e-6 else np.array([0.0, 1.0])
+    if conflict.kind == "peer":
+        offset = float(left @ (p - q))  # which side of the peer we pass, and how far
+        side = 1.0 if offset >= 0.0 else -1.0
+        if abs(offset) < SIDE_CLEAR_M:
+            side = -1.0  # straight through it: the mirror of a pass to its right is to its left
+        shift = left * (-side * peer.epsilon - offset)
+    else:
+        _, gradient = sdf.distance_and_gradient(p)
+        lateral = float(left @ gradient)
+        side = np.sign(lateral) if abs(lateral) > 0.3 else 1.0
+        shift = left * side * (conflict.excess + OBSTACLE_PUSH_M)
+    t = plan.times()
+    weight = np.exp(-0.5 * ((t - conflict.t) / BUMP_WIDTH_S) ** 2)
+    weight[0] = 0.0
+    rate = -(t - conflict.t) / BUMP_WIDTH_S**2 * weight
+    rate[0] = 0.0
+    return Plan(plan.t0, plan.dt, plan.positions + weight[:, None] * shift,
+                plan.velocities + rate[:, None] * shift)

@@ -1,0 +1,196 @@
+"""E-stop latency in ``trustfg sim``: from ``trustfg stop`` to every car applying zero.
+
+    python benchmarks/bench_estop.py [--stops 20] [--bus-stops 5] [--seed 0] [--out FILE]
+
+Runs ``trustfg sim --stay`` (mocap-sim, four car processes, the launcher) and joins its bus
+as the operator (fleet.operator.OperatorSession). Then, round after round: start a trial,
+wait a random moment while the cars drive (U(1, 4) s after the departure, drawn from
+``--seed``), run ``trustfg stop --config RUN/fleet.toml`` as a fresh process, as an operator
+types it, and measure from just before that process is started until every car that was
+moving applies a zero command for good (mocap-sim's command log, 5 ms physics ticks); check
+that every car stays at zero for a second (and after its process is resumed, see below);
+release; carry the cars back to their starts (mocap-sim's reset); next round.
+
+In every fourth round the car processes are SIGSTOPped just before the stop, which then
+goes ``--path link`` only: the direct path with no car process's cooperation; the
+processes are resumed after a second -- they never heard of the stop and command motion
+again -- and the cars must still hold until the release. ``--bus-stops`` more rounds use
+``--path bus`` only, to show the bus path alone (a fresh process first opens its Zenoh
+session), and ``--session-stops`` rounds stop from the benchmark's own running operator
+session, as ``trustfg go``'s stop key and the dashboard's button do (measured from the
+call). Prints the table the README quotes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from trustfg.agent import messages
+from trustfg.agent.scenario_files import load_scenario
+from trustfg.fleet.bus import FleetBus
+from trustfg.fleet.launch import free_port
+from trustfg.fleet.operator import OperatorSession
+from trustfg.fleet.testbed import CommandLog
+
+HOLD_S = 1.0
+
+
+def car_pids(run: Path) -> list[int]:
+    """The car processes of a ``trustfg sim`` run (each leads its own process group)."""
+    pids = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                argv = (entry / "cmdline").read_bytes().split(b"\0")
+            except OSError:
+                continue
+            if b"car" in argv and str(run / "fleet.toml").encode() in argv:
+                pids.append(int(entry.name))
+    return pids
+
+
+class Operator:
+    """The benchmark's operator on the run's bus (heartbeat, starts, releases)."""
+
+    def __init__(self, fleet):
+        self.bus = FleetBus(fleet.bus, fleet.fleet, None, listen=(f"tcp/127.0.0.1:{free_port()}",),
+                            kinds=("status",), operator_kinds=())
+        self.bus.open()
+        self.session = OperatorSession(fleet, self.bus)
+        self.inbox = messages.Inbox()
+
+    def poll(self, seconds: float = 0.0) -> None:
+        end = time.monotonic() + seconds
+        while True:
+            self.session.step()
+            for received in self.bus.drain():
+                message = self.inbox.accept(received.payload, key_sender=received.sender)
+                if message is not None:
+                    self.session.heard(message, received.at)
+            if time.monotonic() >= end:
+                return
+            time.sleep(0.01)
+
+    def wait_states(self, wanted: set[str], timeout_s: float) -> bool:
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            self.poll(0.02)
+            if all(seen.state in wanted for seen in self.session.cars.values()):
+                return True
+        return False
+
+
+def one_stop(run: Path, log: CommandLog, operator: Operator, ids: list[int], delay_s: float, path: str,
+             pause: bool, control_port: int) -> dict:
+    now = time.time()
+    operator.session.start({car: (now + 0.5, 0.4) for car in ids})
+    operator.poll(0.5 + delay_s)
+    moving = log.moving()
+    pids = car_pids(run) if pause else []
+    for pid in pids:
+        os.killpg(pid, signal.SIGSTOP)
+    issued = time.time()
+    if path == "session":  # what trustfg go's stop key and the dashboard's button do
+        operator.session.estop()
+        exit_status = 0
+    else:
+        exit_status = subprocess.run([sys.executable, "-m", "trustfg", "stop", "--config", str(run / "fleet.toml"),
+                                      "--path", path, "--wait", "1"], capture_output=True, timeout=30).returncode
+    operator.poll(HOLD_S)
+    for pid in pids:
+        os.killpg(pid, signal.SIGCONT)
+    if pause:
+        operator.poll(HOLD_S)  # the processes, resumed, command motion: the cars must hold
+    held = log.held_since(issued, ids)
+    latency = max((held[car] - issued for car in moving if held[car] is not None), default=None)
+    row = {"path": path, "car_processes_paused": pause, "moving_at_stop": sorted(moving),
+           "latency_s": None if latency is None else round(latency, 4),
+           "all_stopped": all(held[car] is not None for car in ids),
+           "moved_again": sorted(log.moved_after(max((t for t in held.values() if t), default=issued))),
+           "stop_exit": exit_status}
+    operator.session.release()
+    operator.wait_states({"waiting", "arrived"}, 10.0)
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.sendto(b'{"reset": true}', ("127.0.0.1", control_port))
+    operator.poll(0.5)
+    return row
+
+
+def summary(rows: list[dict]) -> dict:
+    values = np.array([r["latency_s"] for r in rows if r["latency_s"] is not None]) * 1e3
+    if not len(values):
+        return {"stops": len(rows)}
+    return {"stops": len(rows), "measured": len(values), "median_ms": round(float(np.median(values)), 1),
+            "p90_ms": round(float(np.percentile(values, 90)), 1), "max_ms": round(float(values.max()), 1),
+            "all_stopped": all(r["all_stopped"] for r in rows),
+            "moved_again": sum(bool(r["moved_again"]) for r in rows)}
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--stops", type=int, default=20, help="stops with trustfg stop's default (both paths)")
+    parser.add_argument("--bus-stops", type=int, default=5, help="stops on the bus path alone")
+    parser.add_argument("--session-stops", type=int, default=5,
+                        help="stops from a running operator's session (go's key, the dashboard's button)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the random moments")
+    parser.add_argument("--out", type=Path, default=None, help="write every stop as JSON here")
+    args = parser.parse_args()
+    rng = np.random.default_rng(args.seed)
+    run = Path(tempfile.mkdtemp(prefix="bench-estop-"))
+    control_port = free_port(socket.SOCK_DGRAM)
+    sim = subprocess.Popen([sys.executable, "-m", "trustfg", "sim", "--no-dashboard", "--stay", "--timeout", "3600",
+                            "--out", str(run), f"--mocap=--control-port={control_port}"],
+                           stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True)
+    rows: list[dict] = []
+    operator = None
+    try:
+        for line in sim.stdout:
+            if "go (seed" in line:
+                break
+        fleet = load_scenario(run / "fleet.toml")
+        ids = [c.id for c in fleet.cars]
+        operator = Operator(fleet)
+        operator.poll(1.0)
+        operator.session.abort()  # the launcher's own trial: ours start from the starts
+        operator.wait_states({"waiting"}, 10.0)
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            s.sendto(b'{"reset": true}', ("127.0.0.1", control_port))
+        plan = ([("both", k % 4 == 3) for k in range(args.stops)] + [("bus", False)] * args.bus_stops
+                + [("session", False)] * args.session_stops)
+        for k, (path, pause) in enumerate(plan):
+            row = one_stop(run, CommandLog(run / "commands.csv"), operator, ids, float(rng.uniform(1.0, 4.0)),
+                           "link" if pause else path, pause, control_port)
+            rows.append(row)
+            print(f"stop {k + 1}/{len(plan)}: {row}", flush=True)
+    finally:
+        if operator is not None:
+            operator.bus.close()
+        os.killpg(sim.pid, signal.SIGINT)
+        sim.wait(60)
+    both = [r for r in rows if r["path"] in ("both", "link")]
+    result = {"trustfg stop (both paths; every 4th: link only, car processes stopped)": summary(both),
+              "of which car processes stopped": summary([r for r in both if r["car_processes_paused"]]),
+              "bus path alone": summary([r for r in rows if r["path"] == "bus"]),
+              "an operator's session (both paths)": summary([r for r in rows if r["path"] == "session"]),
+              "rows": rows}
+    for name, numbers in result.items():
+        if name != "rows":
+            print(f"{name}: {numbers}")
+    if args.out:
+        args.out.write_text(json.dumps(result, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

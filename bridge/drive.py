@@ -1,0 +1,52 @@
+"""One control tick of a car: the plan and the pose in, a velocity command out.
+
+The car process (fleet.car_process, at ``control.command_rate_hz`` on real time) and the
+in-process fleet (fleet.fleet_sim, on simulated time) both command their cars through
+:func:`drive`, so the experiments measure the pipeline that drives the cars:
+
+1. STOP when the car may not drive (no start yet, before its departure, arrived), has
+   no plan, or does not see itself;
+2. else the tracking command for the plan (bridge.tracking);
+3. capped, when ``guard.enabled``, by the proximity guard (bridge.guard) against the
+   other cars it sees and the map's walls ahead of it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+
+from ..agent.config import Scenario
+from ..agent.gp import Plan
+from ..agent.world import SignedDistanceField
+from .guard import speed_cap
+from .tracking import track
+
+
+@dataclass(frozen=True)
+class Command:
+    v: float
+    omega: float
+    stop: bool = False
+    """Send STOP (the car may not drive, has no plan, or no pose)."""
+    guard_limited: bool = False
+    """The guard lowered the tracking speed."""
+
+
+STOP = Command(0.0, 0.0, stop=True)
+
+
+def drive(plan: Plan | None, t: float, pose: tuple[float, float, float] | None, may_drive: bool,
+          others: Callable[[], Iterable[tuple[float, float, float, float]]], radius_m: float,
+          scenario: Scenario, sdf: SignedDistanceField | None) -> Command:
+    """The command of a car at ``pose`` (x, y, yaw; None: not seen) following ``plan`` at
+    time ``t``; ``others()`` gives the other cars it sees, (x, y, yaw, radius), and is
+    asked only when the guard needs it."""
+    if pose is None or plan is None or not may_drive:
+        return STOP
+    v, omega = track(plan, t, pose[0], pose[1], pose[2], scenario.tracking, scenario.vehicle)
+    if scenario.guard.enabled:
+        cap = speed_cap(*pose, radius_m, others(), scenario.guard, scenario.safety, sdf)
+        if v > cap:
+            return Command(cap, omega, guard_limited=True)
+    return Command(v, omega)

@@ -1,0 +1,142 @@
+"""A replan made safe (agent.safe_plan) and its fallback (agent.fallback): a plan that fails
+verification is not used; other guesses are tried; without one the car brakes along its
+last verified plan and stops short of what it knows of."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from trustfg.agent.config import Obstacle, PlannerConfig, SafetyConfig, VehicleConfig, VerifyConfig, WorldConfig
+from trustfg.agent.fallback import brake_after, fallback
+from trustfg.agent.gp import Plan, standing
+from trustfg.agent.planner import PeerConstraint, PlanRequest
+from trustfg.agent.safe_plan import FALLBACK, FIRST, RETRY, UNVERIFIED, plan_safely
+from trustfg.agent.verify import Bounds, verify
+from trustfg.agent.world import build_sdf
+
+SAFETY = SafetyConfig()
+R = 0.1
+EPS = SAFETY.epsilon_0(R, R)
+CONFIG = VerifyConfig()
+PLANNER = PlannerConfig()
+
+
+def bounds(peers: int) -> Bounds:
+    return Bounds.of(SAFETY.epsilon_obstacle(R), SAFETY.obstacle_breach(R),
+                     [SAFETY.breach_distance(R, R)] * peers, VehicleConfig())
+
+
+def straight(start, end, t0=0.0, duration=10.0, n=21) -> Plan:
+    start, end = np.asarray(start, float), np.asarray(end, float)
+    u = np.linspace(0.0, 1.0, n)
+    s = 3 * u**2 - 2 * u**3  # from rest to rest
+    ds = (6 * u - 6 * u**2) / duration
+    return Plan(t0, duration / (n - 1), start + s[:, None] * (end - start), ds[:, None] * (end - start))
+
+
+def least_gap(plan: Plan, peer: Plan) -> float:
+    times = np.linspace(plan.t0, plan.t_end, 4000)
+    return float(np.min(np.linalg.norm(plan.position_at(times) - peer.position_at(times), axis=1)))
+
+
+@pytest.fixture(scope="module")
+def narrow():
+    """A street 0.9 m wide (walls at y = +-0.45)."""
+    return build_sdf(WorldConfig(bounds_m=(-3.0, -0.45, 3.0, 0.45)))
+
+
+@pytest.fixture(scope="module")
+def room():
+    return build_sdf(WorldConfig(bounds_m=(-3.0, -3.0, 3.0, 3.0)))
+
+
+def test_a_plan_that_fails_verification_is_not_used_the_car_stops_short(narrow):
+    """A peer stands in a street too narrow to pass it at epsilon; the optimiser's plan
+    squeezes past (soft hinges), so no plan verifies: the car brakes along its verified
+    plan and stops short of the peer."""
+    peer = standing(np.array([0.0, 0.15]), 0.0)  # passing it needs 0.41 m, the wall leaves 0.36
+    verified = straight((-2.0, 0.0), (2.0, 0.0))  # verified before the peer stood there
+    t_now = 2.0
+    (p,), (v,) = verified.state_at(t_now)
+    request = PlanRequest(t_now, p, v, np.array([2.0, 0.0]), 10.0, SAFETY.epsilon_obstacle(R),
+                          peers=(PeerConstraint(peer, EPS),), warm_start=verified)
+    outcome = plan_safely(request, bounds(1), PLANNER, CONFIG, narrow, verified)
+    need = EPS - CONFIG.tolerance * (EPS - SAFETY.breach_distance(R, R))
+    assert outcome.outcome == FALLBACK and outcome.blocked_by == (0,)
+    assert outcome.verdict.ok
+    assert least_gap(outcome.plan, peer) >= need
+    (v_end,) = outcome.plan.state_at(outcome.plan.t_end)[1]
+    assert np.linalg.norm(v_end) < 1e-6 and outcome.plan.positions[-1][0] < 0.0  # stopped, short of it
+    # What the optimiser alone would have driven:
+    unverified = plan_safely(request, bounds(1), PLANNER, dataclasses.replace(CONFIG, enabled=False), narrow, verified)
+    assert unverified.outcome == UNVERIFIED and least_gap(unverified.plan, peer) < need
+
+
+def test_a_plan_through_the_middle_of_a_peer_is_retried_on_its_other_side(room):
+    """A warm start right through a standing peer feels no push to either side (the hinge's
+    gradient vanishes at its centre): warm and tightened plans fail; 'other side' passes."""
+    peer = standing(np.array([0.0, 0.0]), 0.0)
+    through = straight((-2.0, 0.0), (2.0, 0.0))
+    request = PlanRequest(0.0, np.array([-2.0, 0.0]), np.zeros(2), np.array([2.0, 0.0]), 10.0,
+                          SAFETY.epsilon_obstacle(R), peers=(PeerConstraint(peer, EPS),), warm_start=through)
+    outcome = plan_safely(request, bounds(1), PLANNER, CONFIG, room, None)
+    assert outcome.outcome == RETRY and outcome.tried[:3] == ("warm", "tighten", "other side")
+    assert verify(outcome.plan, request.peers, bounds(1), room, CONFIG).ok
+    once = plan_safely(request, bounds(1), PLANNER, dataclasses.replace(CONFIG, max_attempts=1), room, None)
+    assert once.outcome == FALLBACK  # without the retries: no verified plan this replan
+
+
+def test_a_clear_plan_verifies_first_try(room):
+    request = PlanRequest(0.0, np.array([-2.0, 0.0]), np.zeros(2), np.array([2.0, 0.0]), 10.0,
+                          SAFETY.epsilon_obstacle(R))
+    outcome = plan_safely(request, bounds(0), PLANNER, CONFIG, room, None)
+    assert outcome.outcome == FIRST and outcome.tried == ("cold",) and outcome.verdict.ok
+
+
+def test_braking_slows_at_the_given_rate_along_the_path_and_stands():
+    timing = straight((-2.0, 0.0), (2.0, 1.0))
+    t_b, decel = 4.0, 1.0
+    plan = brake_after(timing, t_b, decel, 1.0)
+    times = np.linspace(1.0, plan.t_end + 1.0, 600)
+    speed = np.linalg.norm(plan.state_at(times)[1], axis=1)
+    before = times <= t_b
+    assert np.allclose(plan.position_at(times[before]), timing.position_at(times[before]), atol=2e-3)
+    braking = np.diff(speed[~before]) / np.diff(times[~before])
+    assert np.all(braking <= 0.15) and np.min(braking) >= -1.25 * decel  # never speeds up; ~decel
+    assert speed[-1] < 1e-6
+    path = timing.position_at(np.linspace(0.0, 10.0, 2000))
+    off = [np.min(np.linalg.norm(path - q, axis=1)) for q in plan.position_at(times)]
+    assert max(off) < 0.01  # on the path
+
+
+def test_the_fallback_keeps_a_verified_plan_while_it_is_clear_and_brakes_short_of_a_newcomer(room):
+    verified = straight((-2.0, 0.0), (2.0, 0.0))
+    t_now = 3.0
+    (p,), (v,) = verified.state_at(t_now)
+    clear = PlanRequest(t_now, p, v, np.array([2.0, 0.0]), 10.0, SAFETY.epsilon_obstacle(R))
+    kept, verdict = fallback(verified, clear, bounds(0), room, CONFIG)
+    assert kept is verified and verdict.ok
+    newcomer = standing(np.array([1.0, 0.0]), t_now)  # now stands on the way ahead
+    blocked = dataclasses.replace(clear, peers=(PeerConstraint(newcomer, EPS),))
+    plan, verdict = fallback(verified, blocked, bounds(1), room, CONFIG)
+    assert verdict.ok and plan is not verified
+    assert least_gap(plan, newcomer) >= EPS - CONFIG.tolerance * (EPS - SAFETY.breach_distance(R, R))
+    assert plan.positions[-1][0] > p[0] + 0.1  # it went on as far as it safely could
+
+
+def test_a_car_without_a_verified_plan_that_stands_keeps_standing(room):
+    request = PlanRequest(0.0, np.array([0.5, 0.5]), np.zeros(2), np.array([2.0, 0.0]), 10.0,
+                          SAFETY.epsilon_obstacle(R))
+    plan, verdict = fallback(None, request, bounds(0), room, CONFIG)
+    assert np.allclose(plan.positions, [0.5, 0.5]) and np.allclose(plan.velocities, 0.0)
+
+
+def test_an_obstacle_in_the_way_is_passed_by_the_retries():
+    """A straight route through the middle of a pillar: no gradient to either side."""
+    sdf = build_sdf(WorldConfig(bounds_m=(-3.0, -3.0, 3.0, 3.0),
+                                obstacles=(Obstacle(min=(-0.3, -0.3), max=(0.3, 0.3)),)))
+    request = PlanRequest(0.0, np.array([-2.0, 0.0]), np.zeros(2), np.array([2.0, 0.0]), 12.0,
+                          SAFETY.epsilon_obstacle(R))
+    outcome = plan_safely(request, bounds(0), PLANNER, CONFIG, sdf, None)
+    assert outcome.outcome in (FIRST, RETRY) and outcome.verdict.ok

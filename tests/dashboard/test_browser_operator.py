@@ -1,0 +1,85 @@
+"""The dashboard's stop button in a real browser (headless Chromium, Playwright), on a live
+fleet of processes: a page without the operator's token is refused and stops nothing;
+the operator's page stops every car (mocap-sim's command log), they stay stopped, and its
+release button releases them to wait for a new start."""
+
+import subprocess
+import sys
+import time
+
+import pytest
+
+from tests.conftest import wait_for
+from tests.dashboard.test_browser import ARTIFACTS, CHROMIUM_FLAGS, chromium, page_up
+from trustfg.fleet.launch import free_port
+from trustfg.fleet.testbed import LoopbackFleet
+
+TOKEN = "operator-token-made-by-the-test"
+
+
+@pytest.fixture(scope="module")
+def operated(intersection, tmp_path_factory):
+    out = tmp_path_factory.mktemp("operator-page")
+    token_file = out / "token"
+    token_file.write_text(TOKEN + "\n")
+    with LoopbackFleet(intersection, out) as fleet:
+        port = free_port()
+        page = subprocess.Popen([sys.executable, "-m", "trustfg", "dashboard", "--config", str(fleet.config),
+                                 "--port", str(port), "--operator", "--token-file", str(token_file),
+                                 "--listen", f"tcp/127.0.0.1:{free_port()}"],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+        try:
+            printed = page.stdout.readline()
+            assert printed.strip() == f"dashboard: http://127.0.0.1:{port}/?token={TOKEN}", printed
+            assert fleet.wait_states({"waiting"}, timeout_s=60.0), fleet.states()
+            yield fleet, port
+        finally:
+            page.terminate()
+            page.communicate(timeout=10)
+
+
+def test_only_the_operators_page_stops_the_fleet_and_the_cars_stay_stopped_until_released(operated):
+    from playwright.sync_api import sync_playwright
+
+    fleet, port = operated
+    ARTIFACTS.mkdir(exist_ok=True)
+    assert wait_for(lambda: page_up(port), 30.0)
+    now = time.time()
+    fleet.session.start({car: (now + 0.5, 0.4) for car in fleet.ids})
+    assert wait_for(lambda: fleet.moving() == set(fleet.ids), 15.0), fleet.states()
+    with sync_playwright() as pw:
+        browser = pw.chromium.launch(executable_path=chromium(), args=CHROMIUM_FLAGS)
+        try:
+            stranger = browser.new_page()
+            stranger.goto(f"http://127.0.0.1:{port}/")
+            stranger.wait_for_selector("#estop", state="visible", timeout=20000)
+            pressed = time.time()
+            stranger.click("#estop")
+            stranger.wait_for_selector("#operator-status[data-result='refused']", timeout=5000)
+            time.sleep(0.5)
+            assert fleet.moving() == set(fleet.ids)  # nothing stopped
+            assert "e_stopped" not in fleet.states().values()
+
+            page = browser.new_page(viewport={"width": 1500, "height": 900})
+            page.goto(f"http://127.0.0.1:{port}/?token={TOKEN}")
+            page.wait_for_selector("#connection[data-state='connected']", timeout=20000)
+            assert "token" not in page.url  # not left in the address bar
+            assert fleet.moving(), fleet.states()
+            pressed = time.time()
+            page.click("#estop")
+            page.wait_for_selector("#operator-status[data-result='ok']", timeout=5000)
+            assert wait_for(lambda: None not in fleet.held_since(pressed, fleet.ids).values(), 2.0)
+            held = fleet.held_since(pressed, fleet.ids)
+            assert max(held.values()) - pressed < 1.0, held
+            assert fleet.wait_states({"e_stopped"}, timeout_s=3.0), fleet.states()
+            time.sleep(1.0)
+            assert fleet.held_since(pressed, fleet.ids) == held  # stays stopped
+            page.screenshot(path=str(ARTIFACTS / "dashboard-operator-stopped.png"))
+
+            released = time.time()
+            page.click("#release")
+            assert fleet.wait_states({"waiting"}, timeout_s=3.0), fleet.states()
+            time.sleep(1.0)
+            assert not fleet.moved_after(released)  # released cars wait for a new start
+        finally:
+            browser.close()
