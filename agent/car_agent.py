@@ -347,6 +347,12 @@ class CarAgent:
 
     # --- outputs ----------------------------------------------------------------------------
 
+    def number_on_from(self, before: "CarAgent") -> None:
+        """Number our messages on from ``before``'s (a fresh mind in the same car process, for
+        a new trial): the peers' inboxes take a sequence that starts over only as a restarted
+        sender's, after 2 s of its messages dropped as replays."""
+        self._seq = Counter(before._seq)
+
     def next_seq(self, kind: str) -> int:
         self._seq[kind] += 1
         return self._seq[kind]

@@ -181,6 +181,7 @@ class CarProcess:
             depart, cruise = self.operation.depart_at, self.operation.cruise_mps
             self._plan = None
             agent = self._new_agent()
+            agent.number_on_from(self.agent)
             agent.set_departure(depart, cruise)
             for plan, at in self._last_plans.values():  # what the peers intend, as last heard
                 agent.receive(plan, at)

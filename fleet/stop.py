@@ -28,6 +28,9 @@ from .link_stop import DIRECT_PERIOD_S, DIRECT_REPEAT_S, LinkStopper, first_e_st
 if TYPE_CHECKING:
     from ..agent.config import Scenario
 
+BUS_JOIN_S = 1.0
+"""A release or an abort waits up to this long for the car processes to be seen on the bus."""
+
 CONFIRMED = {"estop": lambda state: state == "e_stopped", "release": lambda state: state not in ("e_stopped", ""),
              "abort": lambda state: state not in ("driving", "stuck", "")}
 
@@ -92,6 +95,8 @@ def _on_the_bus(fleet: "Scenario", cars: list[int], action: str, args: argparse.
         if args.path != "link":
             bus = FleetBus(fleet.bus, fleet.fleet, None, listen=tuple(args.listen), operator_kinds=())
             bus.open()
+            if action != "estop":  # not urgent: first let the session reach the car processes (their
+                _wait_alive(bus, cars, BUS_JOIN_S)  # tokens), or the message waits for their history query
             session = OperatorSession(fleet, bus, direct=False)
             {"estop": session.estop, "release": session.release,
              "abort": lambda cars: session.abort(cars, args.trial)}[action](args.cars)
@@ -128,6 +133,16 @@ def _on_the_bus(fleet: "Scenario", cars: list[int], action: str, args: argparse.
         if bus is not None:
             bus.close()
     return _report(cars, action, seen, stopper, issued, sent_direct)
+
+
+def _wait_alive(bus, cars: list[int], timeout_s: float) -> None:
+    """Until every named car process is seen on the bus, or ``timeout_s``. A session that
+    publishes the moment it opens reaches only the peers it is already connected to; the
+    others get the message later, from the cache, when their subscribers query it."""
+    deadline = time.monotonic() + timeout_s
+    while not all(bus.alive.get(car) for car in cars) and time.monotonic() < deadline:
+        bus.wait(0.01)
+        bus.drain()
 
 
 def _busy(stopper: LinkStopper | None) -> bool:
