@@ -4,16 +4,20 @@ Pure logic, no I/O: the in-process simulation (fleet.fleet_sim) and the car proc
 it observations and decoded messages and ask it for plans and reports at the times they
 choose. All times are seconds on the fleet clock.
 
-How peers' plans are used (docs/architecture.md, "Trust"):
-* A plan message is checked against where its sender was seen when it sent it (its
-  stamp; the observation nearest that time). The discrepancy is transparency evidence
-  (graded, agent.trust); a plan delayed past ``stale_after_s`` is dropped unjudged. A plan that
+How peers' plans are used (agent.evidence; docs/architecture.md, "Trust"):
+* A plan message is moved onto our clock by its sender's estimated clock offset (a stamp
+  too far in the future is refused) and checked against where its sender was seen at
+  its stamp; the discrepancy is transparency evidence (graded, agent.trust). A plan that
   misses by more than ``plan_reject_m`` is not planned against: we keep the sender's last
   plan that agreed with what we saw. Observation beats testimony.
-* A peer with no usable plan for ``stale_after_s`` (silent, partitioned, or lying every
-  time) is predicted from its observed motion and kept at the widest safety distance.
-  Silence is never counted as lying: it yields no transparency evidence at all.
+* Every accepted plan is audited as its future comes (agent.audit): a future that does
+  not come true is evidence against its sender (its epsilon widens).
+* A plan not checked yet is planned against only at the widest epsilon; a peer with no
+  usable plan for ``stale_after_s`` (silent, partitioned, or lying every time) is
+  predicted from its observed motion and kept at the widest safety distance. Silence is
+  never counted as lying: it yields no transparency evidence at all.
 * Safety and consistency evidence come every ``evidence_period_s`` from observations.
+  Safety blames only a car that closes on another inside the breach distance.
   Consistency compares accelerations averaged over CONSISTENCY_WINDOW_S: the change of
   the peer's observed velocity over the window against the change announced by the plan
   it had made when the window began (by the plan's stamp) -- "did it do what it said it
@@ -21,7 +25,10 @@ How peers' plans are used (docs/architecture.md, "Trust"):
   derivative of noisy poses, and one plan for both ends keeps late or bunched messages
   from looking like erratic driving. Without a plan made within one replan period (plus
   REPLAN_MARGIN_S) of the window's start -- lost or delayed messages -- there is no
-  consistency evidence.
+  consistency evidence; a change of mind announced at once excuses what follows it.
+
+A liar (``car.attack``, agent.attacks) plans and drives like everyone else and lies in
+what it publishes.
 
 Decentralised consensus: every agent replans at a fixed rate against the latest accepted
 plans of its peers and publishes its own; the fleet iterates to agreement. Ties and
@@ -42,15 +49,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import misbehaviour
+from .attacks import Liar
 from .config import CarConfig, Scenario
 from .deadlock import DeadlockWatch, peers_seen
+from .evidence import PeerView, audit, belief, safety_verdict, take_plan
 from .gp import Plan, standing
 from .messages import PlanMessage, TrustReport
 from .planner import PeerConstraint, PlanningError, PlanRequest, PlanResult
 from .safe_plan import FALLBACK, Outcome, plan_safely
 from .track import Track
-from .trust import CONSISTENCY, SAFETY, TRANSPARENCY, TrustBook, graded
+from .trust import CONSISTENCY, SAFETY, TrustBook, graded
 from .verify import Bounds
 from .world import SignedDistanceField
 
@@ -65,27 +73,13 @@ REPLAN_MARGIN_S = 0.15
 """Consistency is judged only against a plan stamped at most one replan period plus this
 before the window began. An older announcement has been superseded by plans we never
 received (loss, delay); holding a car to it would read silence as erratic driving."""
+ANNOUNCED_MIN_S = 0.2
+"""A change of plan excuses what a car did only over at least this long after it."""
 WARM_GOAL_M = 0.25
 """A plan that ends further than this from the goal does not warm-start a replan."""
 START_FROM_PLAN_M = 0.05
 START_FROM_PLAN_MPS = 0.15
 """A replan starts from the previous plan while the car is this close to it."""
-
-
-@dataclass
-class PeerView:
-    """What we know of one peer."""
-
-    latest: PlanMessage | None = None
-    latest_received: float = -np.inf
-    accepted: Plan | None = None
-    """The last plan that agreed with where the peer was seen."""
-    accepted_received: float = -np.inf
-    goal: tuple[float, float] | None = None
-    velocities: deque = field(default_factory=lambda: deque(maxlen=64))
-    """(t, observed velocity) at evidence ticks."""
-    history: deque = field(default_factory=lambda: deque(maxlen=32))
-    """(stamp, plan) of the plans accepted lately, in order of arrival."""
 
 
 @dataclass
@@ -97,7 +91,7 @@ class CarAgent:
     """When the car may start moving (fleet clock)."""
     cruise_speed_mps: float | None = None
     rng: np.random.Generator = field(default_factory=lambda: np.random.default_rng(0))
-    """Drives this car's misbehaviour only (seeded by the caller)."""
+    """Drives this car's attack only (seeded by the caller)."""
     clock: Callable[[], float] | None = None
     """Wall clock of the replan budget (VerifyConfig.budget_ms) in the car process; None
     in the in-process fleet, whose replans take no simulated time (attempts only)."""
@@ -118,6 +112,13 @@ class CarAgent:
         self._seq = Counter()
         self._last_evidence = -np.inf
         self.radii = {c.id: c.radius_m for c in self.scenario.cars}
+        self.liar = None
+        if self.car.attack is not None:
+            partners = frozenset(c.id for c in self.scenario.cars if c.id != self.car.id and c.attack is not None
+                                 and "collude" in c.attack.names)
+            self.liar = Liar(self.car.id, self.car.attack, self.rng, partners,
+                             tolerance_m=self.scenario.trust.plan_reject_m,
+                             horizon_s=self.scenario.trust.audit_notice_s + self.scenario.control.replan_period_s)
         self.set_departure(self.depart_at, self.cruise_speed_mps or self.scenario.planner.cruise_speed_mps)
 
     def set_departure(self, depart_at: float, cruise_speed_mps: float) -> None:
@@ -135,35 +136,28 @@ class CarAgent:
         self.tracks.setdefault(car_id, Track()).add(t, x, y, yaw)
 
     def receive(self, message: PlanMessage | TrustReport, now: float) -> None:
-        """A decoded, validated message from a peer."""
+        """A decoded, validated message from a peer (``now``: when it arrived)."""
         if message.sender == self.car.id:
             return
+        view = self.view(message.sender)
         if isinstance(message, TrustReport):
-            self.trust.receive(message)
+            view.clock.add(message.stamp, now)
+            self.trust.receive(message, now)
             return
-        view = self.peers.setdefault(message.sender, PeerView())
-        view.latest, view.latest_received, view.goal = message, now, message.goal
-        if now - message.stamp > self.scenario.trust.stale_after_s:
-            self.counters["plans_too_late"] += 1  # delayed in the network: no use, no evidence
-            return
-        # The claim is checked where the sender was seen when it made it (the message's
-        # stamp), not now: a plan that arrives late is not a lie.
-        track = self.tracks.get(message.sender)
-        position = track.position_at(message.stamp) if track else None
-        if position is None:
-            # Nothing to check it against (not seen then, or pose lost): use it, unverified.
-            self.counters["plans_unverified"] += 1
-            view.accepted, view.accepted_received = message.plan, now
-            return
-        (claimed,) = message.plan.position_at(message.stamp)
-        miss = float(np.linalg.norm(claimed - position))
-        success, failure = graded(miss, self.scenario.trust.transparency_tolerance_m)
-        self.trust.record(message.sender, TRANSPARENCY, success, failure, now)
-        if miss <= self.scenario.trust.plan_reject_m:
-            view.accepted, view.accepted_received = message.plan, now
-            view.history.append((message.stamp, message.plan))
-        else:
-            self.counters["plans_rejected"] += 1
+        take_plan(view, message, now, self.tracks.get(message.sender), self._recorder(message.sender, now),
+                  self.counters)
+
+    def view(self, peer: int) -> PeerView:
+        if peer not in self.peers:
+            self.peers[peer] = PeerView(self.scenario.trust)
+        return self.peers[peer]
+
+    def _recorder(self, peer: int, now: float):
+        return lambda dimension, success, failure: self.trust.record(peer, dimension, success, failure, now)
+
+    def clock_offsets(self) -> dict[int, float]:
+        """Every peer's estimated clock offset (its clock minus ours), seconds."""
+        return {peer: view.clock.offset for peer, view in self.peers.items() if view.clock.samples}
 
     def peer_gone(self, peer: int) -> None:
         """The peer's process left the bus (liveliness lost): stop believing its last plan
@@ -183,16 +177,16 @@ class CarAgent:
         self._last_evidence = now
         motions = {cid: tr.motion() for cid, tr in self.tracks.items()}
         motions = {cid: m for cid, m in motions.items() if m is not None and now - m.stamp <= 0.2}
+        for peer, view in self.peers.items():
+            audit(view, self.tracks.get(peer), self._recorder(peer, now), self.counters)
         for peer, motion in motions.items():
             if peer == self.car.id:
                 continue
-            others = [(m.position, self.radius(cid)) for cid, m in motions.items() if cid != peer]
+            others = [(m, self.scenario.safety.breach_distance(self.radius(peer), self.radius(cid)))
+                      for cid, m in motions.items() if cid != peer]
             if others:
-                # Does the peer keep the required clearance from every car it is near?
-                margin = min(float(np.linalg.norm(motion.position - p))
-                             - self.scenario.safety.breach_distance(self.radius(peer), r) for p, r in others)
-                breach = margin < 0.0
-                self.trust.record(peer, SAFETY, 0.0 if breach else 1.0, 1.0 if breach else 0.0, now)
+                # Does the peer keep the required clearance from every car it closes on?
+                self.trust.record(peer, SAFETY, *safety_verdict(motion, others, config), now)
             view = self.peers.get(peer)
             if view is not None:
                 view.velocities.append((motion.stamp, motion.velocity))
@@ -219,11 +213,17 @@ class CarAgent:
             if peer == self.car.id:
                 continue
             view = self.peers.get(peer)
-            if view and view.accepted is not None and now - view.accepted_received <= trust.stale_after_s:
-                epsilon = self.trust.epsilon(peer, now, self.epsilon_0(peer), planner.transparency)
-                constraints.append((peer, PeerConstraint(view.accepted, epsilon)))
+            believed = belief(view, now) if view else None
+            widest = self.epsilon_0(peer) * max(trust.epsilon_gain_max, trust.epsilon_gain_fixed)
+            if believed is not None:
+                plan, verified = believed
+                if verified or not trust.reject_plans:
+                    epsilon = self.trust.epsilon(peer, now, self.epsilon_0(peer), planner.transparency)
+                else:
+                    self.counters["peers_unverified"] += 1  # not checked yet: not as if trusted
+                    epsilon = widest
+                constraints.append((peer, PeerConstraint(plan, epsilon)))
                 continue
-            widest = self.epsilon_0(peer) * trust.epsilon_gain_max
             predicted = self._predict_from_observation(peer, now)
             if predicted is not None:
                 self.counters["peers_predicted"] += 1
@@ -263,16 +263,19 @@ class CarAgent:
         self.t_arrive = max(self.t_arrive, t0 + remaining / self.cruise + 0.5 * ARRIVAL_SLACK_S)
         t_arrive = self.t_arrive
         constraints = self.peer_constraints(now)
-        peers = tuple(c for _, c in constraints)
         request = PlanRequest(
             t_now=t0, position=position, velocity=velocity, goal=goal, t_arrive=t_arrive,
-            epsilon_obstacle=self.scenario.safety.epsilon_obstacle(self.car.radius_m), peers=peers, warm_start=self.plan, route=self.car.route,
+            epsilon_obstacle=self.scenario.safety.epsilon_obstacle(self.car.radius_m),
+            peers=tuple(c for _, c in constraints), warm_start=self.plan, route=self.car.route,
             lane=(self.car.start, *self.car.route),
         )
         detour = self._give_way(now, motion.position)
         if detour is not None:  # giving way in a deadlock (agent.deadlock): to the detour instead
             request = dataclasses.replace(request, goal=detour, route=(), lane=(), t_arrive=t0 + ARRIVAL_SLACK_S
                                           + float(np.linalg.norm(detour - motion.position)) / self.cruise)
+        if self.liar is not None and now >= self.depart_at:  # a framer drives where it means harm
+            request, constraints = self.liar.steer(request, constraints, now, self._seen(now))
+            request = dataclasses.replace(request, peers=tuple(c for _, c in constraints))
         # Warm-start from the previous plan, or, when that one went elsewhere (a fallback
         # stops short, a detour), from the last verified plan if that one goes to the goal.
         warm = next((plan for plan in (self.plan, self.verified) if plan is not None
@@ -358,18 +361,25 @@ class CarAgent:
         """Our plan as we share it (falsified if this car is set to misinform)."""
         if self.plan is None:
             return None
-        shared, falsified = misbehaviour.maybe_falsify(self.plan, self.car.misinformation, self.rng)
-        if falsified:
-            self.counters["plans_falsified"] += 1
-        return PlanMessage(self.car.id, self.next_seq("plan"), now, shared,
+        shared, stamp = self.plan, now
+        if self.liar is not None:
+            shared, stamp = self.liar.plan(self.plan, now, self._motion(self.car.id, now), self._seen(now))
+        return PlanMessage(self.car.id, self.next_seq("plan"), stamp, shared,
                            (float(self.car.goal[0]), float(self.car.goal[1])))
 
+    def _motion(self, car_id: int, now: float):
+        track = self.tracks.get(car_id)
+        motion = track.motion() if track else None
+        return motion if motion is not None and now - motion.stamp <= self.scenario.trust.stale_after_s else None
+
+    def _seen(self, now: float) -> dict:
+        """The fresh observed motion of every other car."""
+        seen = {car_id: self._motion(car_id, now) for car_id in self.tracks if car_id != self.car.id}
+        return {car_id: m for car_id, m in seen.items() if m is not None}
+
     def trust_message(self, now: float) -> TrustReport:
-        report = self.trust.report(self.car.id, self.next_seq("trust"), now, self.epsilon_0,
-                                   self.scenario.planner.transparency)
-        if self.car.false_testimony:
-            report = misbehaviour.falsify_testimony(report)
-        return report
+        report = self.trust.report(self.car.id, self.next_seq("trust"), now, self.epsilon_0, self.scenario.planner.transparency)
+        return self.liar.testimony(report) if self.liar is not None else report
 
     def trust_in(self, peer: int, now: float) -> float:
         return self.trust.trust(peer, now)
@@ -380,7 +390,10 @@ def _acceleration_mismatch(view: PeerView, fresh_s: float) -> float | None:
     the announcement being the newest accepted plan the peer had made when the window
     began (by its stamp: a plan that arrived late still tells what the peer meant then);
     None if that plan is older than ``fresh_s`` then or there are not enough
-    observations yet."""
+    observations yet. A change of mind announced in time is not inconsistency: if a
+    plan made since (at least ANNOUNCED_MIN_S ago) announced what the peer did from its
+    stamp on, the smaller mismatch counts -- a car that had to brake for a surprise and
+    said so at its next replan is consistent; one that says it brakes and does not is not."""
     t, observed = view.velocities[-1]
     start = next(((t_old, v_old) for t_old, v_old in reversed(view.velocities)
                   if t - t_old >= CONSISTENCY_WINDOW_S - 1e-6), None)
@@ -391,8 +404,17 @@ def _acceleration_mismatch(view: PeerView, fresh_s: float) -> float | None:
                     default=None)
     if announced is None or t_old - announced[0] > fresh_s:
         return None
-    plan = announced[1]
+    mismatch = _mismatch(announced[1], t_old, observed_old, t, observed)
+    since = [(stamp, p) for stamp, p in view.history if t_old < stamp <= t - ANNOUNCED_MIN_S]
+    if since:
+        stamp, plan = since[-1]
+        then = min(view.velocities, key=lambda tv: abs(tv[0] - stamp))
+        if abs(then[0] - stamp) <= 0.5 * ANNOUNCED_MIN_S:
+            mismatch = min(mismatch, _mismatch(plan, then[0], then[1], t, observed))
+    return mismatch
+
+
+def _mismatch(plan, t_old: float, observed_old: np.ndarray, t: float, observed: np.ndarray) -> float:
     (v_then,), (v_now,) = plan.state_at(t_old)[1], plan.state_at(t)[1]
     change = (observed - observed_old) - (v_now - v_then)
     return float(np.linalg.norm(change)) / (t - t_old)
-

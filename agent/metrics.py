@@ -93,18 +93,32 @@ def inconsistency_index(times: np.ndarray, states: np.ndarray, depart_at: list[f
     return float(np.sum(spread) / total) if total > 0 else 0.0
 
 
-def trust_separation(trust_times: np.ndarray, trust: np.ndarray, liar: int, honest: list[int],
-                     gap: float) -> float | None:
-    """First time from which every honest car's trust in the liar stays at least ``gap``
-    below its trust in every honest peer until the end; None if it never settles."""
-    ok = np.ones(len(trust_times), dtype=bool)
+def _separated(trust: np.ndarray, liar: int, honest: list[int], gap: float) -> np.ndarray:
+    """Per trust sample: every honest car trusts the liar at least ``gap`` less than every
+    honest peer."""
+    ok = np.ones(trust.shape[0], dtype=bool)
     for a in honest:
         peers = [b for b in honest if b != a]
         if not peers:
             continue
-        best_honest = trust[:, a, peers].min(axis=1)
-        ok &= trust[:, a, liar] <= best_honest - gap
+        ok &= trust[:, a, liar] <= trust[:, a, peers].min(axis=1) - gap
+    return ok
+
+
+def trust_separation(trust_times: np.ndarray, trust: np.ndarray, liar: int, honest: list[int],
+                     gap: float) -> float | None:
+    """First time from which every honest car's trust in the liar stays at least ``gap``
+    below its trust in every honest peer until the end; None if it never settles."""
+    ok = _separated(trust, liar, honest, gap)
     if not ok[-1]:
         return None
     bad = np.nonzero(~ok)[0]
     return float(trust_times[0] if len(bad) == 0 else trust_times[min(bad[-1] + 1, len(trust_times) - 1)])
+
+
+def trust_detection(trust_times: np.ndarray, trust: np.ndarray, liar: int, honest: list[int],
+                    gap: float) -> float | None:
+    """First time at which every honest car's trust in the liar is at least ``gap`` below
+    its trust in every honest peer (it may recover later: on-off liars); None if never."""
+    ok = np.nonzero(_separated(trust, liar, honest, gap))[0]
+    return float(trust_times[ok[0]]) if len(ok) else None

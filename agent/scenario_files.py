@@ -119,6 +119,10 @@ def _convert(tp: Any, value: Any, path: str) -> Any:
         if not isinstance(value, str):
             raise ConfigError(f"{path}: expected a string, got {_describe(value)}")
         return value
+    if origin is dict:
+        if not isinstance(value, dict):
+            raise ConfigError(f"{path}: expected a table, got {_describe(value)}")
+        return {_convert(args[0], k, path): _convert(args[1], v, f"{path}.{k}") for k, v in value.items()}
     if origin is tuple:
         if not isinstance(value, list):
             raise ConfigError(f"{path}: expected an array, got {_describe(value)}")
@@ -172,6 +176,12 @@ def _fields(obj: Any, defaults: Any = None) -> dict[str, Any]:
                  or getattr(obj, f.name) != getattr(defaults, f.name))}
 
 
+def _has_defaults(obj: Any) -> bool:
+    """Whether every field of dataclass ``obj`` has a default (AttackConfig's name has none)."""
+    return all(f.default is not dataclasses.MISSING or f.default_factory is not dataclasses.MISSING
+               for f in dataclasses.fields(obj))
+
+
 def _toml_value(value: Any) -> str:
     if isinstance(value, bool):
         return "true" if value else "false"
@@ -183,7 +193,9 @@ def _toml_value(value: Any) -> str:
         if value and all(dataclasses.is_dataclass(v) for v in value):  # e.g. obstacles: one a line
             return "[\n" + "".join(f"  {_toml_value(v)},\n" for v in value) + "]"
         return "[" + ", ".join(_toml_value(v) for v in value) + "]"
-    if dataclasses.is_dataclass(value):
-        fields = _fields(value, type(value)())  # inline tables: what differs from the defaults
+    if isinstance(value, dict):
+        return "{ " + ", ".join(f"{json.dumps(str(k))} = {_toml_value(v)}" for k, v in value.items()) + " }"
+    if dataclasses.is_dataclass(value):  # inline tables: what differs from the defaults, if it has them
+        fields = _fields(value, type(value)() if _has_defaults(value) else None)
         return "{ " + ", ".join(f"{k} = {_toml_value(v)}" for k, v in fields.items()) + " }"
     raise TypeError(f"cannot write {type(value).__name__} to TOML")

@@ -13,6 +13,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+NEAREST_S = 0.05
+"""An observation stands for a moment this close to it (Track.position_at)."""
+
 
 @dataclass(frozen=True)
 class Motion:
@@ -28,6 +31,9 @@ class Track:
     window_s: float = 0.4
     history_s: float = 2.0
     samples: deque = field(default_factory=deque)
+    _motion: Motion | None = field(default=None, init=False, repr=False)
+    _array: np.ndarray | None = field(default=None, init=False, repr=False)
+    """Caches of motion() and of the samples as an array, until the next sample."""
 
     def add(self, t: float, x: float, y: float, yaw: float) -> None:
         if not (np.isfinite(t) and np.isfinite(x) and np.isfinite(y) and np.isfinite(yaw)):
@@ -37,9 +43,11 @@ class Track:
         self.samples.append((t, x, y, yaw))
         while self.samples and self.samples[0][0] < t - self.history_s:
             self.samples.popleft()
+        self._motion = self._array = None
 
     def clear(self) -> None:
         self.samples.clear()
+        self._motion = self._array = None
 
     @property
     def last_stamp(self) -> float | None:
@@ -49,6 +57,11 @@ class Track:
         """Fitted motion at the latest sample, or None with no observation yet."""
         if not self.samples:
             return None
+        if self._motion is None:
+            self._motion = self._fit()
+        return self._motion
+
+    def _fit(self) -> Motion:
         t_last, x, y, yaw = self.samples[-1]
         recent = [s for s in self.samples if s[0] >= t_last - self.window_s]
         if len(recent) < 4:
@@ -60,10 +73,20 @@ class Track:
         return Motion(t_last, coef[0], coef[1], 2.0 * coef[2], yaw)
 
     def position_at(self, t: float) -> np.ndarray | None:
-        """The observed position at time t (nearest sample within 50 ms), if any."""
+        """The observed position at time t (nearest sample within NEAREST_S), if any."""
+        positions, seen = self.positions_at(np.array([t]))
+        return positions[0] if seen[0] else None
+
+    def positions_at(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Observed positions (k, 2) at ``times`` (nearest sample) and whether one was
+        within NEAREST_S of each."""
+        times = np.asarray(times, dtype=float)
         if not self.samples:
-            return None
-        best = min(self.samples, key=lambda s: abs(s[0] - t))
-        if abs(best[0] - t) > 0.05:
-            return None
-        return np.array([best[1], best[2]])
+            return np.zeros((len(times), 2)), np.zeros(len(times), dtype=bool)
+        if self._array is None:
+            self._array = np.asarray(self.samples, dtype=float)
+        stamps = self._array[:, 0]
+        right = np.clip(np.searchsorted(stamps, times), 0, len(stamps) - 1)
+        left = np.clip(right - 1, 0, len(stamps) - 1)
+        nearest = np.where(np.abs(stamps[left] - times) <= np.abs(stamps[right] - times), left, right)
+        return self._array[nearest, 1:3].copy(), np.abs(stamps[nearest] - times) <= NEAREST_S

@@ -15,16 +15,25 @@ earns. A consistency failure weighs ``consistency_failure_weight`` (1): cars rep
 a changed mind is not a lie.
 
 Testimonies (the paper's Bayesian consensus): every agent publishes its DIRECT evidence
-only. A receiver a fuses a testimony of reporter r about peer b by discounting it with
-its belief in r (Josang's discounting: the reporter's evidence is scaled by a's belief
-mass in r, b_ar = alpha/(alpha + beta + 2) of r's weakest dimension) and adding it to its
-own evidence (cumulative fusion). Defence against lying testimonies:
+only (fused values are never re-published, so rumours cannot loop). Every car of a fleet
+sees the same motion capture and hears the same broadcast plans, so a testimony mostly
+repeats evidence the receiver holds already; adding it (cumulative fusion) would count
+the same observations once per reporter, and lets a reporter inflate its claim. So a
+receiver a fuses testimonies about peer b as dependent evidence:
   * a reporter's word about itself or about the receiver is ignored;
-  * discounting: a reporter we do not believe carries little weight;
-  * deviation test (Buchegger & Le Boudec): once a holds enough direct evidence about b,
-    a testimony whose expected value differs from a's own by more than
-    ``testimony_deviation`` is rejected and counted.
-Fused values are never re-published, so rumours cannot loop.
+  * a testimony claims at most ``testimony_max_evidence`` per dimension (inflation is cut);
+  * discounting (Josang): r's evidence is scaled by a's belief mass in r,
+    b_ar = alpha/(alpha + beta + 2) of r's weakest dimension;
+  * deviation test (Buchegger & Le Boudec): once a holds ``testimony_min_evidence`` about
+    b, a testimony whose expected value differs from a's own by more than
+    ``testimony_deviation`` is rejected and counted;
+  * averaging, not adding: the accepted testimonies are averaged (dependent sources), and
+    only their surplus over a's own amount of evidence is added to it -- a testimony
+    speaks only for what a could not see itself (a partition, a late join);
+  * a testimony can make a more careful, never less: per dimension the fused opinion is
+    used only where its expected value is below a's own. Praise cannot clear anyone, so a
+    colluding pair cannot vouch each other back into trust; slander is bounded by the
+    rules above.
 
 Overall trust in a peer is its weakest dimension, tau = min_d tau_d.
 
@@ -32,7 +41,11 @@ The transparency trust widens the safety distance (paper Sec. III.D, IV.C):
 
     eps_ab = eps_0 * g(tau_t),   g(tau) = 1 + (g_max - 1) * clip((tau_full - tau) / (tau_full - tau_floor), 0, 1)
 
-so g(1) = 1, g is non-increasing and bounded by g_max.
+so g(1) = 1, g is non-increasing and bounded by g_max. tau_t here is not the mean of the
+transparency belief but its ``epsilon_quantile`` lower quantile (the q-quantile of
+Beta(alpha + 1, beta + 1)): a peer we have little evidence about -- new, silent,
+partitioned -- is planned around as its worst plausible case, a peer with a long record
+of truth at eps_0, and a known liar at the widest epsilon whatever its luck lately.
 """
 
 from __future__ import annotations
@@ -42,6 +55,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.special import betaincinv
 
 from .config import TrustConfig
 from .messages import DIMENSIONS, PeerTrust, TrustReport
@@ -64,6 +78,11 @@ def graded(error: float, tolerance: float) -> tuple[float, float]:
     tolerance, full failure from twice the tolerance, linear in between."""
     failure = float(np.clip((error - tolerance) / tolerance, 0.0, 1.0))
     return 1.0 - failure, failure
+
+
+def lower_bound(alpha: float, beta: float, quantile: float) -> float:
+    """The ``quantile`` quantile of Beta(alpha + 1, beta + 1): a lower confidence bound of tau."""
+    return float(betaincinv(alpha + 1.0, beta + 1.0, quantile))
 
 
 def epsilon_gain(tau: float, config: TrustConfig) -> float:
@@ -92,8 +111,11 @@ class TrustBook:
     owner: int
     config: TrustConfig
     direct: dict[int, Opinion] = field(default_factory=dict)
-    testimonies: dict[int, TrustReport] = field(default_factory=dict)
+    testimonies: dict[int, tuple[TrustReport, float]] = field(default_factory=dict)
+    """The latest testimony of each reporter and when it arrived."""
     counters: Counter = field(default_factory=Counter)
+    _fused: dict = field(default_factory=dict, repr=False)
+    """fused() per (peer, now), until the next evidence or testimony."""
 
     # --- direct evidence -----------------------------------------------------------------
 
@@ -119,6 +141,7 @@ class TrustBook:
         opinion = self.opinion(peer, now)
         self._decay(opinion, now)
         weight = self.config.consistency_failure_weight if dimension == CONSISTENCY else self.config.failure_weight
+        self._fused.clear()
         opinion.alpha[dimension] += success
         opinion.beta[dimension] += weight * failure
         self.counters[f"evidence_{DIMENSIONS[dimension]}"] += 1
@@ -127,39 +150,62 @@ class TrustBook:
 
     # --- testimonies ---------------------------------------------------------------------
 
-    def receive(self, report: TrustReport) -> None:
+    def receive(self, report: TrustReport, now: float | None = None) -> None:
+        """Keep the latest testimony of each reporter (``now``: when it arrived, our clock)."""
         if report.sender == self.owner:
             return
-        self.testimonies[report.sender] = report
+        self.testimonies[report.sender] = (report, report.stamp if now is None else now)
+        self._fused.clear()
         self.counters["testimonies"] += 1
 
     def forget_reporter(self, reporter: int) -> None:
         self.testimonies.pop(reporter, None)
+        self._fused.clear()
 
     def fused(self, peer: int, now: float) -> tuple[np.ndarray, np.ndarray]:
-        """Own evidence plus discounted, deviation-tested testimonies about ``peer``."""
+        """Own evidence, made more careful where testimonies say so (module docstring)."""
+        key = (peer, now)
+        if key not in self._fused:
+            if len(self._fused) > 256:  # bounded, also when no evidence comes for hours
+                self._fused.clear()
+            self._fused[key] = self._fuse(peer, now)
+        alpha, beta = self._fused[key]
+        return alpha.copy(), beta.copy()
+
+    def _fuse(self, peer: int, now: float) -> tuple[np.ndarray, np.ndarray]:
+        c = self.config
         own = self.opinion(peer, now)
         self._decay(own, now)
-        alpha, beta = own.alpha.copy(), own.beta.copy()
         own_tau = own.tau()
-        own_amount = (own.alpha - self.config.prior_alpha) + (own.beta - self.config.prior_beta)
-        for reporter, report in self.testimonies.items():
+        own_amount = (own.alpha - c.prior_alpha) + (own.beta - c.prior_beta)
+        weights, evidence = [], []
+        for reporter, (report, arrived) in self.testimonies.items():
             if reporter in (peer, self.owner) or peer not in report.peers:
                 continue
-            said = report.peers[peer]
-            r_alpha, r_beta = np.array(said.alpha), np.array(said.beta)
             weight = self.discount(reporter, now)
             if weight <= 0.0:
                 continue
-            said_tau = expected(r_alpha + self.config.prior_alpha, r_beta + self.config.prior_beta)
-            for d in range(3):
-                if (own_amount[d] >= self.config.testimony_min_evidence
-                        and abs(said_tau[d] - own_tau[d]) > self.config.testimony_deviation):
-                    self.counters["testimonies_rejected"] += 1
-                    continue
-                alpha[d] += weight * r_alpha[d]
-                beta[d] += weight * r_beta[d]
-        return alpha, beta
+            said = report.peers[peer]
+            r, s = np.array(said.alpha), np.array(said.beta)
+            scale = np.minimum(1.0, c.testimony_max_evidence / np.maximum(r + s, 1e-12))
+            age = c.forgetting ** max(0.0, now - arrived)
+            r, s = r * scale * age, s * scale * age
+            said_tau = expected(r + c.prior_alpha, s + c.prior_beta)
+            deviates = (own_amount >= c.testimony_min_evidence) & (np.abs(said_tau - own_tau) > c.testimony_deviation)
+            self.counters["testimonies_rejected"] += int(np.sum(deviates))
+            use = ~deviates
+            weights.append(use.astype(float))
+            evidence.append((np.where(use, weight * r, 0.0), np.where(use, weight * s, 0.0)))
+        if not evidence:
+            return own.alpha, own.beta
+        count = np.maximum(np.sum(weights, axis=0), 1.0)
+        r_said = np.sum([e[0] for e in evidence], axis=0) / count  # averaged: dependent sources
+        s_said = np.sum([e[1] for e in evidence], axis=0) / count
+        said_amount = r_said + s_said
+        surplus = np.where(said_amount > own_amount, (said_amount - own_amount) / np.maximum(said_amount, 1e-12), 0.0)
+        alpha, beta = own.alpha + surplus * r_said, own.beta + surplus * s_said
+        careful = expected(alpha, beta) < own_tau  # testimony may lower trust, never raise it
+        return np.where(careful, alpha, own.alpha), np.where(careful, beta, own.beta)
 
     def discount(self, reporter: int, now: float) -> float:
         """Weight of a reporter's testimony: a's belief mass in r's weakest dimension."""
@@ -181,9 +227,13 @@ class TrustBook:
         return float(np.min(self.tau(peer, now)))
 
     def epsilon(self, peer: int, now: float, epsilon_0: float, transparency: bool) -> float:
+        """The distance to keep from ``peer``: eps_0 * g(lower bound of transparency trust);
+        with the transparency factor off, eps_0 * ``epsilon_gain_fixed`` from everyone."""
         if not transparency:
             return epsilon_0 * self.config.epsilon_gain_fixed
-        return epsilon_0 * epsilon_gain(float(self.tau(peer, now)[TRANSPARENCY]), self.config)
+        alpha, beta = self.fused(peer, now)
+        bound = lower_bound(alpha[TRANSPARENCY], beta[TRANSPARENCY], self.config.epsilon_quantile)
+        return epsilon_0 * epsilon_gain(bound, self.config)
 
     def report(self, sender: int, seq: int, now: float, epsilon_0: Callable[[int], float],
                transparency: bool) -> TrustReport:

@@ -10,6 +10,9 @@ between every pair of cars, and the alerts a person watching should see:
     stale_peer  nothing heard from a car for STALE_AFTER_S, or its process left the bus
     lost_pose   a car reports it does not see itself (pose invalid), or its pose is older
                 than LOST_POSE_AFTER_S
+    clock       a car's clock is more than CLOCK_ALERT_S off, as its peers estimate it
+                (the median of what their status reports; agent.clocks): its plans are
+                still corrected up to trust.clock_tolerance_s, but its NTP needs a look
 
 Positions for the distance matrix come from ground truth when the recording has it
 (``trustfg sim`` runs), else from the poses the cars publish.
@@ -32,6 +35,7 @@ STALE_AFTER_S = 1.5
 LOST_POSE_AFTER_S = 0.5
 LOW_TRUST = 0.6
 PLAN_SAMPLES = 40
+CLOCK_ALERT_S = 0.1
 
 
 def css_color(name: str) -> str:
@@ -142,8 +146,23 @@ class FleetView:
                 if c.pose is not None and c.pose.valid and self.now - c.pose_at <= LOST_POSE_AFTER_S}
         return {(a, b): math.dist(seen[a], seen[b]) for a in seen for b in seen if a < b}
 
+    def clock_offset(self, car_id: int) -> float | None:
+        """The median of the peers' estimates of ``car_id``'s clock offset (seconds), from the
+        ``clock_ahead_ms_N`` / ``clock_behind_ms_N`` counters of their status."""
+        seen = []
+        for other in self.cars.values():
+            counters = other.status.counters if other.status is not None and other.id != car_id else {}
+            for sign, key in ((1, f"clock_ahead_ms_{car_id}"), (-1, f"clock_behind_ms_{car_id}")):
+                if key in counters:
+                    seen.append(sign * counters[key] / 1e3)
+        return float(np.median(seen)) if seen else None
+
     def alerts(self) -> list[dict]:
         found = []
+        for a in self.cars:
+            offset = self.clock_offset(a)
+            if offset is not None and abs(offset) > CLOCK_ALERT_S:
+                found.append(("clock", (a,), f"car {a}'s clock is {offset * 1e3:+.0f} ms off, its peers say"))
         for (a, b), d in self.distances_now().items():
             if d < self.breach_distance[self._index[a], self._index[b]]:
                 found.append(("breach", (a, b), f"cars {a} and {b} are {d:.2f} m apart"))
@@ -189,6 +208,7 @@ class FleetView:
                 "replan_ms": round(status.replan_ms, 2) if status else None,
                 "iterations": status.iterations if status else None,
                 "rates": {kind: round(len(w) / RATE_WINDOW_S, 1) for kind, w in car.arrivals.items()},
+                "clock_offset_ms": None if (offset := self.clock_offset(cid)) is None else round(offset * 1e3, 1),
                 "alive": car.alive, "last_heard_s": round(self.now - car.heard_at, 2) if math.isfinite(car.heard_at) else None,
                 "outcomes": plan_outcomes(status),
             })

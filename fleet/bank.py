@@ -11,8 +11,9 @@ fleet.baselines for ORCA) with the same start delays and cruise speeds for every
   plan verification with its retries and braking fallback, the proximity guard and the
   deadlock watch (fleet.fleet_sim runs them as the car process does; ``--set
   verify.enabled=false`` and the like switch them off);
-* ``fixed``: no trust factors (no consistency factor, no transparency scaling): the
-  proximity hinge at eps_0 from every peer; the rest of the pipeline as in ``full``;
+* ``fixed``: no trust factors (no consistency factor, no transparency scaling) and every
+  plan believed (trust.reject_plans = false): the proximity hinge at eps_0 from every
+  peer; the rest of the pipeline as in ``full``;
 * ``wide``: the same with 2 eps_0 from every peer (trust.epsilon_gain_fixed = 2);
 * ``orca``: ORCA (pyrvo) driving the same cars with perfect state and no messages.
 
@@ -50,7 +51,7 @@ import numpy as np
 from ..agent.config import ConfigError, Scenario
 from ..agent.scenario_files import read_source, scenario_from_dict
 from .command import command_parser, configured
-from .experiments import NO_TRUST, Progress, _sdf
+from .experiments import BELIEVING, NO_TRUST, Progress, _sdf
 from .fleet_sim import simulate
 from .runs import RunRecord, motion_summary
 
@@ -73,9 +74,10 @@ class Method:
 
 METHODS = {
     "full": Method("full pipeline", "every trust factor on, the pipeline as shipped"),
-    "fixed": Method("no trust, eps_0", "no trust factors; eps_0 from every peer", {"planner": NO_TRUST}),
+    "fixed": Method("no trust, eps_0", "no trust factors; eps_0 from every peer",
+                    {"planner": NO_TRUST, "trust": BELIEVING}),
     "wide": Method("no trust, 2 eps_0", "no trust factors; 2 eps_0 from every peer",
-                   {"planner": NO_TRUST, "trust": {"epsilon_gain_fixed": 2.0}}),
+                   {"planner": NO_TRUST, "trust": BELIEVING | {"epsilon_gain_fixed": 2.0}}),
     "orca": Method("ORCA", "ORCA (pyrvo), perfect state, no messages", orca=True),
 }
 

@@ -78,7 +78,7 @@ STUCK_MOTION_MPS = 0.03
 class CarProcess:
     """Everything one car runs; ``run()`` returns when ``stop`` is set."""
 
-    def __init__(self, scenario: Scenario, car: CarConfig, clock=time.time):
+    def __init__(self, scenario: Scenario, car: CarConfig, clock=None):
         if not car.link:
             raise ConfigError(f"cars[id={car.id}].link: a car process needs the address of its car")
         try:  # a bad [bus] or zenoh_config file is the config's fault: one line now, not retries
@@ -87,7 +87,10 @@ class CarProcess:
             raise ConfigError(str(exc)) from None
         self.scenario = scenario
         self.car = car
-        self.clock = clock
+        if clock is None and car.clock_offset_s:
+            log.warning("car %d: running with a clock %+.3f s off the fleet's (clock_offset_s, for tests)",
+                        car.id, car.clock_offset_s)
+        self.clock = clock or (lambda: time.time() + car.clock_offset_s)
         self.natnet = client_options(scenario.natnet)
         link_key(car)  # a missing or bad key is a config error now, not when driving
         self.stop = threading.Event()

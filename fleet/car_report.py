@@ -104,21 +104,32 @@ class WaitingLog:
 
 def status_counters(process: Any, now: float) -> dict[str, int]:
     """The counters a car process's status message carries (at most 64: the plan ages, the
-    plan outcomes, deadlocks and the car link's first, which resync checks, the dashboard
-    and ``trustfg check`` read)."""
+    plan outcomes, deadlocks, the car link's and the peers' clock offsets first, which resync
+    checks, the dashboard and ``trustfg check`` read)."""
     counters = dict(process.agent.counters | process.counters)
     counters |= {f"inbox_{k}": v for k, v in process.inbox.dropped.items()}
     counters["commands_sent"] = process.control.sent
     counters["stale_pose_stops"] = process.control.stale_pose_stops
     counters["guard_limited"] = process.control.guard_limited
     counters["lap"] = process.laps.lap
+    if process.agent.liar is not None:
+        counters |= {f"attack_{k}": v for k, v in process.agent.liar.counters.items()}
     for peer, view in process.agent.peers.items():  # how fresh each peer's plan is
         counters[f"plan_age_ms_{peer}"] = int(min(1e9, max(0.0, now - view.accepted_received) * 1e3))
+    counters |= clock_counters(process.agent.clock_offsets())  # each peer's clock, as we estimate it
     # the car link, as the car's answers tell
     counters["link_answer_age_ms"] = int(min(1e9, max(0.0, now - process._link_answered) * 1e3))
     counters["link_e_stop_latched"] = int(process._car_latched)
-    first = ("plan", "deadlock", "link_")  # plan ages and outcomes (agent.safe_plan), deadlocks, the link
+    # plan ages and outcomes (agent.safe_plan), deadlocks, the link, the peers' clocks (agent.clocks)
+    first = ("plan", "deadlock", "link_", "clock_")
     return dict(sorted(counters.items(), key=lambda kv: not kv[0].startswith(first))[:64])
+
+
+def clock_counters(offsets: dict[int, float]) -> dict[str, int]:
+    """Peers' clock offsets as status counters (counts are >= 0): ``clock_ahead_ms_N`` or
+    ``clock_behind_ms_N``, milliseconds (dashboard.state reads them back)."""
+    return {f"clock_{'ahead' if offset >= 0 else 'behind'}_ms_{peer}": int(round(abs(offset) * 1e3))
+            for peer, offset in offsets.items()}
 
 
 def write_stats(path: Path, process: Any, bus: FleetBus | None, sender: CommandSender) -> None:
@@ -134,6 +145,8 @@ def write_stats(path: Path, process: Any, bus: FleetBus | None, sender: CommandS
         "control": process.control.summary(),
         "agent": dict(agent.counters),
         "trust": dict(agent.trust.counters),
+        "clock_offsets_s": {str(peer): round(offset, 4) for peer, offset in agent.clock_offsets().items()},
+        "attack": dict(agent.liar.counters) if agent.liar is not None else None,
         "inbox_dropped": dict(process.inbox.dropped),
         "inbox_accepted": dict(process.inbox.accepted),
         "bus": dict(bus.counters) if bus is not None else {},

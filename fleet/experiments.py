@@ -2,7 +2,9 @@
 
     trustfg experiment {proximity,consistency,transparency,lab,pipeline,all} [--seed N] [--seeds K]
                        [--out DIR] [--jobs J]
-    trustfg experiment bank ...        (the scenario bank and its baselines: fleet.bank)
+    trustfg experiment adversaries ...         (fleet.adversaries: every attack, three fleets)
+    trustfg experiment transparency-sweep ...  (fleet.sweep: misinformation x g_max)
+    trustfg experiment bank ...                (fleet.bank: the scenario bank and its baselines)
 
 writes DIR/<name>/metrics.json and PNG figures and prints a table. metrics.json is
 
@@ -11,13 +13,16 @@ writes DIR/<name>/metrics.json and PNG figures and prints a table. metrics.json 
 
 with one RUN per seed (keys documented in the README). The lab experiment has a third
 variant "A" (everyone honest); its "on"/"off" are the paper's scenario B (car 1 at 40 %
-misinformation) with and without the transparency factor.
+misinformation) with trust on and with the paper's baseline ("off": no transparency factor
+and every plan believed, :func:`trust_off`).
 """
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import functools
+import importlib
 import json
 import logging
 import os
@@ -31,19 +36,18 @@ from typing import Callable
 import numpy as np
 
 from ..agent import metrics
-from ..agent.config import Scenario
+from ..agent.config import PAPER_LIAR, AttackConfig, Scenario
 from ..agent.scenario_files import load_scenario
 from ..agent.world import build_sdf
 from .command import command_parser, configured
 from .fleet_sim import simulate
 from .runs import RunRecord, motion_summary, plan_outcomes, rounded
+from .trust_record import TRUST_GAP, TRUST_SETTLE_S
 
 log = logging.getLogger(__name__)
 
 LIAR_ID = 1
 LIAR_MISINFORMATION = 0.4
-TRUST_GAP = 0.2
-TRUST_SETTLE_S = 3.0
 
 
 def factors(scenario: Scenario, **switches: bool) -> Scenario:
@@ -52,16 +56,51 @@ def factors(scenario: Scenario, **switches: bool) -> Scenario:
 
 def with_liar(scenario: Scenario, liar: int = LIAR_ID, p: float = LIAR_MISINFORMATION) -> Scenario:
     """Car ``liar`` publishes falsified plans in a fraction p of messages and lies in its
-    testimonies."""
-    cars = tuple(dataclasses.replace(c, misinformation=p, false_testimony=True) if c.id == liar else c
-                 for c in scenario.cars)
+    testimonies (the paper's liar: attacks ``displaced+false-testimony``)."""
+    return with_attack(scenario, {liar: AttackConfig(PAPER_LIAR, {"p": p})})
+
+
+def with_attack(scenario: Scenario, attacks: dict[int, AttackConfig]) -> Scenario:
+    """The scenario with car ``id`` running ``attacks[id]`` (others as they were)."""
+    cars = tuple(dataclasses.replace(c, attack=attacks[c.id]) if c.id in attacks else c for c in scenario.cars)
     return dataclasses.replace(scenario, cars=cars)
 
 
 ALL_ON = dict(proximity=True, consistency=True, transparency=True)
 ALL_OFF = dict(proximity=False, consistency=False, transparency=False)
 NO_TRUST = dict(proximity=True, consistency=False, transparency=False)
-"""The fair "off": avoidance without trust, the proximity hinge at eps_0 from every peer."""
+"""The fair "off": avoidance without trust, the proximity hinge at eps_0 from every peer
+(with BELIEVING: no plan refused or held wider for want of a check)."""
+BELIEVING = dict(reject_plans=False)
+"""Trust switches of a fleet without trust: every plan believed as it comes."""
+
+
+def believing(scenario: Scenario) -> Scenario:
+    return dataclasses.replace(scenario, trust=dataclasses.replace(scenario.trust, **BELIEVING))
+
+
+def no_trust(scenario: Scenario) -> Scenario:
+    """The planner without trust factors, believing every plan: eps_0 from every peer."""
+    return factors(believing(scenario), **NO_TRUST)
+
+
+def trust_on(scenario: Scenario) -> Scenario:
+    """Every factor, plan rejection, the audit, epsilon from trust."""
+    return factors(scenario, **ALL_ON)
+
+
+def trust_off(scenario: Scenario) -> Scenario:
+    """The paper's baseline: no transparency factor (eps_0 for everyone) and every plan
+    believed as it comes (trust is still gathered, for the metrics)."""
+    return factors(believing(scenario), **(ALL_ON | dict(transparency=False)))
+
+
+def uniform_wide(scenario: Scenario) -> Scenario:
+    """No trust, but every peer kept at eps_0 * g_max: the uniformly careful fleet
+    (``trust.epsilon_gain_fixed``, as the bank's "wide" method)."""
+    off = trust_off(scenario)
+    return dataclasses.replace(off, trust=dataclasses.replace(
+        off.trust, epsilon_gain_fixed=scenario.trust.epsilon_gain_max))
 
 
 def no_avoidance(scenario: Scenario) -> Scenario:
@@ -91,8 +130,7 @@ class Experiment:
 EXPERIMENTS = {
     "proximity": Experiment(
         "proximity", "intersection",
-        {"on": functools.partial(factors, **ALL_ON), "fixed": functools.partial(factors, **NO_TRUST),
-         "off": no_avoidance},
+        {"on": functools.partial(factors, **ALL_ON), "fixed": no_trust, "off": no_avoidance},
         "Do the trust factors prevent proximity breaches on conflicting routes? (fixed: no trust factors, "
         "eps_0 from every peer; off: no avoidance, no verification, no guard)"),
     "consistency": Experiment(
@@ -102,14 +140,12 @@ EXPERIMENTS = {
         "Does the consistency factor make the cars' accelerations more alike?"),
     "transparency": Experiment(
         "transparency", "lab",
-        {"on": lambda s: factors(with_liar(s), **ALL_ON),
-         "off": lambda s: factors(with_liar(s), **(ALL_ON | dict(transparency=False)))},
+        {"on": lambda s: trust_on(with_liar(s)), "off": lambda s: trust_off(with_liar(s))},
         "Do honest cars keep a wider berth from a car that publishes 40 % misinformation?"),
     "lab": Experiment(
         "lab", "lab",
         {"A": functools.partial(factors, **ALL_ON),
-         "on": lambda s: factors(with_liar(s), **ALL_ON),
-         "off": lambda s: factors(with_liar(s), **(ALL_ON | dict(transparency=False)))},
+         "on": lambda s: trust_on(with_liar(s)), "off": lambda s: trust_off(with_liar(s))},
         "The paper's lab left turns: A all honest, B car 1 at 40 % misinformation."),
     "pipeline": Experiment(
         "pipeline", "intersection-8",
@@ -145,16 +181,23 @@ def summarise(scenario: Scenario, record: RunRecord) -> dict:
         "replan_ms_median": round(float(np.median(np.concatenate(record.replan_ms))), 2)
         if any(record.replan_ms) else None,
     } | plan_outcomes(record.counters)
-    if "liar_id" in run:
-        liar = record.car_ids.index(run["liar_id"])
-        honest = [record.car_ids.index(i) for i in run["honest_ids"]]
-        after = record.trust_times >= TRUST_SETTLE_S
-        honest_pairs = [record.trust[after][:, a, b] for a in honest for b in honest if a != b]
-        run["honest_trust_min_after_settle"] = round(float(np.min(honest_pairs)), 4) if honest_pairs else None
+    liars = [record.car_ids.index(i) for i in run.get("liar_ids", [])]
+    honest = [i for i in range(len(record.car_ids)) if i not in liars]
+    after = record.trust_times >= TRUST_SETTLE_S
+    honest_pairs = [record.trust[after][:, a, b] for a in honest for b in honest if a != b]
+    run["honest_trust_min_after_settle"] = round(float(np.min(honest_pairs)), 4) if honest_pairs else None
+    if liars:
         gaps = [record.trust[after][:, a, [b for b in honest if b != a]].min(axis=1) - record.trust[after][:, a, liar]
-                for a in honest]
+                for a in honest for liar in liars]
         run["trust_gap_min_after_settle"] = round(float(np.min(gaps)), 4)
-        run["trust_separated_at_s"] = metrics.trust_separation(record.trust_times, record.trust, liar, honest, TRUST_GAP)
+        separated = [metrics.trust_separation(record.trust_times, record.trust, liar, honest, TRUST_GAP) for liar in liars]
+        detected = [metrics.trust_detection(record.trust_times, record.trust, liar, honest, TRUST_GAP) for liar in liars]
+        run["trust_separated_at_s"] = None if None in separated else max(separated)
+        run["trust_detected_at_s"] = None if None in detected else max(detected)
+        lies = [record.first_lie_s[i] for i in liars if record.first_lie_s and record.first_lie_s[i] is not None]
+        run["first_lie_s"] = round(float(min(lies)), 3) if lies else None
+        run["detection_delay_s"] = (round(run["trust_detected_at_s"] - run["first_lie_s"], 3)
+                                    if lies and run["trust_detected_at_s"] is not None else None)
     return run
 
 
@@ -337,18 +380,39 @@ class Progress:
 # --- command line ------------------------------------------------------------------------------
 
 
-OTHER_EXPERIMENTS = {"bank": "trustfg.fleet.bank"}
-"""Experiments with their own command line (``trustfg experiment bank --help``), not in "all"."""
+def study_options(parser: argparse.ArgumentParser, seeds: int) -> None:
+    """The options every multi-seed study shares: --seed, --seeds, --jobs, --out."""
+    parser.add_argument("--seed", type=int, default=0, help="first seed (default 0)")
+    parser.add_argument("--seeds", type=int, default=seeds, help=f"seeds per cell (default {seeds})")
+    parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="parallel simulations (default: one per core)")
+    parser.add_argument("--out", type=Path, default=None, help="output folder (default runs/experiment-<time>)")
+
+
+def study_folder(out: Path | None, name: str) -> Path:
+    folder = (out or Path("runs") / time.strftime("experiment-%Y%m%d-%H%M%S")) / name
+    folder.mkdir(parents=True, exist_ok=True)
+    return folder
+
+
+def write_study(folder: Path, report: dict, text: str) -> None:
+    """metrics.json and table.md of a study, and the table on stdout."""
+    (folder / "metrics.json").write_text(json.dumps(report, indent=1))
+    (folder / "table.md").write_text(text)
+    print(text)
+    print(f"wrote {folder.resolve()} in {report['wall_time_s']:.0f} s")
+
+
+STUDIES = {"adversaries": "adversaries", "transparency-sweep": "sweep", "bank": "bank"}
+"""Experiments with their own options (``trustfg experiment NAME --help``), by module; not in "all"."""
 
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    if argv and argv[0] in OTHER_EXPERIMENTS:
-        import importlib
-        return importlib.import_module(OTHER_EXPERIMENTS[argv[0]]).main(argv[1:])
+    if argv and argv[0] in STUDIES:
+        return importlib.import_module(f".{STUDIES[argv[0]]}", __package__).main(argv[1:])
     parser = command_parser("trustfg experiment", __doc__,
-                            epilog=f"also: {', '.join(OTHER_EXPERIMENTS)} (see 'trustfg experiment bank --help')")
-    parser.add_argument("name", choices=[*EXPERIMENTS, "all"])
+                            epilog=f"also: {', '.join(STUDIES)} (each with its own --help)")
+    parser.add_argument("name", choices=[*EXPERIMENTS, "all", *STUDIES])
     parser.add_argument("--seed", type=int, default=0, help="first seed (default 0)")
     parser.add_argument("--seeds", type=int, default=20, help="number of seeds (default 20)")
     parser.add_argument("--out", type=Path, default=None,

@@ -4,8 +4,11 @@ Every car is a :class:`CarAgent` (the same planner and trust code the car proces
 driving a simulated unicycle (agent.vehicle) with the tracking controller of the
 bridge (bridge.tracking). Cars see each other through noisy pose observations and talk
 through the fleet message codec (agent.messages: msgpack bytes, decoded and filtered by
-an Inbox per receiver), with a fixed message latency. Time is simulated: a replan takes
-no simulated time, so a run is exactly repeatable from its seed.
+an Inbox per receiver), over a :class:`Network` with latency, jitter and loss
+(``[sim]``). Time is simulated: a replan takes no simulated time, so a run is exactly
+repeatable from its seed. A car with ``clock_offset_s`` reads every time off its own
+clock, that much ahead of the fleet's: its observations, stamps, departure and plan
+tracking, as a car computer with a wrong clock would.
 
 Per seed, each car draws a start delay in [0, start_delay_max_s], a cruise speed in
 cruise_speed_range_mps (:func:`draw_departures`, which ``trustfg sim`` uses too) and a
@@ -66,6 +69,7 @@ def simulate(scenario: Scenario, seed: int, sdf: SignedDistanceField | None = No
     inboxes = [messages.Inbox() for _ in cars]
     vehicles = [VehicleState(c.start[0], c.start[1], c.start_heading) for c in cars]
 
+    clock = np.array([c.clock_offset_s for c in cars])  # each car's clock minus the fleet's
     network = Network(sim, n, np.random.default_rng([seed, 11]))
 
     steps = int(math.ceil(sim.timeout_s / step_s)) + 1
@@ -81,35 +85,36 @@ def simulate(scenario: Scenario, seed: int, sdf: SignedDistanceField | None = No
     for k in range(steps):
         t = k * step_s
         # 1. Deliver due messages through each receiver's inbox (decode + order/replay filter).
+        own = t + clock  # every car's own reading of the time
         for sender, receiver, payload in network.due(t):
             message = inboxes[receiver].accept(payload, key_sender=ids[sender])
             if message is not None:
-                agents[receiver].receive(message, t)
+                agents[receiver].receive(message, own[receiver])
         # 2. Everyone sees everyone (mocap), with noise.
         seen = np.empty((n, n, 3))  # seen[j, i]: car i as car j sees it
         for i, state in enumerate(vehicles):
             noisy = noise_rng.normal(0.0, sim.observation_noise_m, (n, 2))
             seen[:, i] = np.column_stack([state.x + noisy[:, 0], state.y + noisy[:, 1], np.full(n, state.yaw)])
             for j, agent in enumerate(agents):
-                agent.observe(t, ids[i], *seen[j, i])
+                agent.observe(own[j], ids[i], *seen[j, i])
         # 3. Evidence, replanning, reports.
         for i, agent in enumerate(agents):
-            agent.gather_evidence(t)
+            agent.gather_evidence(own[i])
             if t + 1e-9 >= next_replan[i]:
                 next_replan[i] += control.replan_period_s
-                agent.replan(t)
+                agent.replan(own[i])
                 if keep_plans and agent.plan is not None:
                     plan_log.append((t, i, agent.plan))
-                outgoing = agent.plan_message(t)
+                outgoing = agent.plan_message(own[i])
                 if outgoing is not None:
                     network.publish(i, messages.encode(outgoing), t)
             if t + 1e-9 >= next_report[i]:
                 next_report[i] += control.trust_report_period_s
-                network.publish(i, messages.encode(agent.trust_message(t)), t)
+                network.publish(i, messages.encode(agent.trust_message(own[i])), t)
         if record_trust and t + 1e-9 >= next_trust_record:
             next_trust_record += RECORD_TRUST_PERIOD_S
             trust_times.append(t)
-            tr, tp, ep = _trust_snapshot(agents, ids, t)
+            tr, tp, ep = _trust_snapshot(agents, ids, own)
             trust_rows.append(tr)
             transparency_rows.append(tp)
             epsilon_rows.append(ep)
@@ -120,10 +125,10 @@ def simulate(scenario: Scenario, seed: int, sdf: SignedDistanceField | None = No
             state = vehicles[i]
             if arrived[i] is None and math.hypot(state.x - cars[i].goal[0], state.y - cars[i].goal[1]) <= scenario.arrival_radius_m:
                 arrived[i] = t
-            own = agent.tracks[ids[i]].motion()
+            me = agent.tracks[ids[i]].motion()
             others = [(*seen[i, j], cars[j].radius_m) for j in range(n) if j != i]
-            command = drive(agent.plan, t, (own.position[0], own.position[1], own.yaw),
-                            t >= depart[i] and not agent.at_goal, lambda: others, cars[i].radius_m, scenario, sdf)
+            command = drive(agent.plan, own[i], (me.position[0], me.position[1], me.yaw),
+                            own[i] >= depart[i] and not agent.at_goal, lambda: others, cars[i].radius_m, scenario, sdf)
             guard_limited[i] += command.guard_limited
             vehicles[i] = vehicle_step(state, command.v, command.omega, step_s, scenario.vehicle)
         if all(a is not None for a in arrived) and all(abs(s.v) < 1e-3 for s in vehicles):
@@ -143,29 +148,32 @@ def simulate(scenario: Scenario, seed: int, sdf: SignedDistanceField | None = No
         epsilon=np.array(epsilon_rows),
         replan_ms=[list(a.replan_ms) for a in agents],
         counters=[dict(a.counters) | {f"trust_{k}": v for k, v in a.trust.counters.items()}
+                  | ({f"attack_{k}": v for k, v in a.liar.counters.items()} if a.liar else {})
                   | {"guard_limited": guard_limited[i]} | network.counters(i) for i, a in enumerate(agents)],
         inbox=[dict(box.dropped) | {f"accepted_{k}": v for k, v in box.accepted.items()} for box in inboxes],
         final_plans=[(a.plan.positions.copy(), a.plan.velocities.copy()) if a.plan is not None else
                      (np.zeros((0, 2)), np.zeros((0, 2))) for a in agents],
         plan_log=plan_log,
+        first_lie_s=[a.liar.first_lie_at if a.liar else None for a in agents],
     )
 
 
-def _trust_snapshot(agents: list[CarAgent], ids: list[int], t: float):
+def _trust_snapshot(agents: list[CarAgent], ids: list[int], own: np.ndarray):
     n = len(agents)
     trust = np.ones((n, n))
     transparency = np.ones((n, n))
     epsilon = np.zeros((n, n))
     for a, agent in enumerate(agents):
-        planner = agent.scenario.planner
+        t = float(own[a])
         for b, peer in enumerate(ids):
             if a == b:
                 continue
             tau = agent.trust.tau(peer, t)
             trust[a, b] = float(np.min(tau))
             transparency[a, b] = float(tau[2])
-            epsilon[a, b] = agent.trust.epsilon(peer, t, agent.epsilon_0(peer), planner.transparency)
+            epsilon[a, b] = agent.trust.epsilon(peer, t, agent.epsilon_0(peer), agent.scenario.planner.transparency)
     return trust, transparency, epsilon
+
 
 
 

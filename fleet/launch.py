@@ -1,7 +1,8 @@
 """``trustfg sim``: the main job -- a whole fleet as separate OS processes on one machine.
 
-    trustfg sim [--scenario FILE] [--cars N] [--liar ID --misinformation P] [--out DIR]
-                [--seed S] [--timeout S] [--laps K] [--natnet-version V] [--mocap ARG ...]
+    trustfg sim [--scenario FILE] [--cars N] [--liar ID [--attack NAME] [--attack-param K=V ...]
+                [--misinformation P]] [--clock-offset ID=S ...] [--out DIR] [--seed S] [--timeout S]
+                [--laps K] [--natnet-version V] [--mocap ARG ...]
 
 1. Resolves a fleet config for loopback: a free UDP port per car link and for NatNet
    (unicast), a free TCP port per process for Zenoh (explicit endpoints, multicast
@@ -23,7 +24,6 @@ Exit status: 0 when every car arrived with no breach and no process crashed; 1 o
 
 from __future__ import annotations
 
-import csv
 import dataclasses
 import json
 import logging
@@ -32,17 +32,23 @@ import subprocess
 import sys
 import threading
 import time
-from collections import Counter, defaultdict, deque
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
 import numpy as np
 
-from ..agent import messages
-from ..agent.config import ConfigError, Scenario
+from ..agent.config import (
+    ATTACKS,
+    PAPER_LIAR,
+    AttackConfig,
+    ConfigError,
+    Scenario,
+    liar_attack,
+    parse_attack,
+    parse_id_values,
+)
 from ..agent.scenario_files import dump_scenario, load_scenario
-from ..agent.world import build_sdf
 from ..bridge import natnet
 from .bus import FleetBus
 from .command import command_parser, configured, stop_on_signals
@@ -52,7 +58,7 @@ from .link_keys import with_link_keys
 from .operator import OperatorSession
 from .processes import READY_TIMEOUT_S, Processes, wait_ready
 from .recording import convert_run
-from .runs import RunRecord, arrivals, motion_summary, plan_outcomes
+from .sim_summary import Recorder, print_summary, summarise
 
 log = logging.getLogger(__name__)
 
@@ -70,33 +76,39 @@ def default_scenario(cars: int | None) -> str:
     return "intersection-8" if cars is not None and cars > 4 else "intersection"
 
 
-def loopback_fleet(scenario: Scenario, cars: int | None, liar: int | None, misinformation: float,
-                   infra_ip: str = "127.0.0.1", car_ips: dict[int, str] | None = None) -> Scenario:
-    """The scenario wired for one machine: ports, endpoints, unicast NatNet.
-
-    mocap-sim and the observers live at ``infra_ip``; car N's process at ``car_ips[N]``
-    (default: the same address) -- the fault tests give each its own network namespace."""
+def loopback_fleet(scenario: Scenario, cars: int | None, liar: int | list[int] | None = None,
+                   misinformation: float | None = None, infra_ip: str = "127.0.0.1",
+                   car_ips: dict[int, str] | None = None, attack: AttackConfig | None = None,
+                   clock_offsets: dict[int, float] | None = None) -> Scenario:
+    """The scenario wired for one machine: ports, endpoints, unicast NatNet. Car(s) ``liar``
+    run ``attack`` (config.liar_attack); ``clock_offsets`` give car processes clocks off
+    the fleet's (tests). mocap-sim and the observers live at ``infra_ip``; car N's process
+    at ``car_ips[N]`` (default: the same address): the fault tests give each its own netns."""
     chosen = scenario.cars if cars is None else scenario.cars[:cars]
     if cars is not None and len(chosen) < cars:
         raise ConfigError(f"the scenario has {len(scenario.cars)} cars, {cars} were asked for")
-    if liar is not None and liar not in [c.id for c in chosen]:
-        raise ConfigError(f"--liar {liar}: no such car among {[c.id for c in chosen]}")
+    liars = [] if liar is None else [liar] if isinstance(liar, int) else list(liar)
+    named = set(liars) | set(clock_offsets or {})
+    if named - {c.id for c in chosen}:
+        raise ConfigError(f"cars {sorted(named)}: not all among {[c.id for c in chosen]}")
+    lie = liar_attack(attack, misinformation) if liars else None
     wired = []
     for car in chosen:
-        lie = car.id == liar
         ip = (car_ips or {}).get(car.id, infra_ip)
         wired.append(dataclasses.replace(
             car, link=f"udp://{infra_ip}:{free_port(socket.SOCK_DGRAM)}",
             listen=(f"tcp/{ip}:{free_port()}", f"udp/{ip}:{free_port(socket.SOCK_DGRAM)}?rel=0"),
-            misinformation=misinformation if lie else car.misinformation,
-            false_testimony=lie or car.false_testimony))
+            attack=lie if car.id in liars else car.attack,
+            clock_offset_s=(clock_offsets or {}).get(car.id, car.clock_offset_s)))
     endpoints = tuple(e for car in wired for e in car.listen)
-    return dataclasses.replace(
+    fleet = dataclasses.replace(
         scenario, cars=tuple(wired),
         bus=dataclasses.replace(scenario.bus, mode="peer", listen=(), connect=endpoints, multicast_scouting=False),
         natnet=dataclasses.replace(scenario.natnet, server=infra_ip, mode="unicast",
                                    command_port=free_port(socket.SOCK_DGRAM), data_port=free_port(socket.SOCK_DGRAM),
                                    local_interface="0.0.0.0"))
+    fleet.validate()
+    return fleet
 
 
 def with_deadman(scenario: Scenario, deadman_s: float | None) -> Scenario:
@@ -106,42 +118,6 @@ def with_deadman(scenario: Scenario, deadman_s: float | None) -> Scenario:
     operator = dataclasses.replace(scenario.operator, deadman_s=deadman_s)
     operator.validate("operator")
     return dataclasses.replace(scenario, operator=operator)
-
-
-class Recorder:
-    """The observer on the bus: records every message, keeps what the summary needs."""
-
-    def __init__(self, bus: FleetBus, path: Path):
-        self.bus = bus
-        self.inbox = messages.Inbox()
-        self.file = open(path, "w")
-        self.counts: Counter = Counter()
-        self.per_sender: dict[int, Counter] = defaultdict(Counter)
-        self.status: dict[int, messages.StatusMessage] = {}
-        self.trust: dict[int, messages.TrustReport] = {}
-        self.poses: dict[int, deque] = defaultdict(lambda: deque(maxlen=2))
-        """The last two poses each car published (its speed, for fault schedules)."""
-
-    def poll(self) -> None:
-        for received in self.bus.drain():
-            message = self.inbox.accept(received.payload, key_sender=received.sender)
-            record = {"t": round(received.at, 4), "sender": received.sender, "kind": received.kind}
-            if message is None:
-                record["dropped"] = True
-            else:
-                record["message"] = messages.to_dict(message)
-                self.counts[received.kind] += 1
-                self.per_sender[received.sender][received.kind] += 1
-                if isinstance(message, messages.StatusMessage):
-                    self.status[message.sender] = message
-                elif isinstance(message, messages.PoseMessage) and message.valid:
-                    self.poses[message.sender].append(message)
-                elif isinstance(message, messages.TrustReport):
-                    self.trust[message.sender] = message
-            self.file.write(json.dumps(record) + "\n")
-
-    def close(self) -> None:
-        self.file.close()
 
 
 def departures(scenario: Scenario, seed: int, t_go: float) -> dict[int, tuple[float, float]]:
@@ -279,102 +255,6 @@ def run(scenario: Scenario, out: Path, seed: int = 0, timeout_s: float | None = 
     return summary
 
 
-def read_ground_truth(path: Path, ids: list[int]) -> tuple[np.ndarray, np.ndarray]:
-    """(times (T,), states (T, n, 5)) from mocap-sim's CSV; rows of a time step together."""
-    rows = defaultdict(dict)
-    with open(path, newline="") as f:
-        for row in csv.DictReader(f):
-            rows[float(row["t"])][int(row["car_id"])] = [float(row[k]) for k in ("x", "y", "yaw", "v", "omega")]
-    times = sorted(t for t, cars in rows.items() if all(i in cars for i in ids))
-    states = np.array([[rows[t][i] for i in ids] for t in times])
-    return np.array(times), states
-
-
-def summarise(scenario: Scenario, out: Path, recorder: Recorder, t_go: float | None,
-              crashed: list[str]) -> dict:
-    """The RUN keys (fleet.runs) from mocap-sim's ground truth, plus what only a run of
-    processes has: replan times, messages, command timing, crashes."""
-    ids = [c.id for c in scenario.cars]
-    times, states = read_ground_truth(out / "ground_truth.csv", ids)
-    rel_times = times - (t_go or times[0])
-    depart = [0.0] * len(ids)
-    start = next((json.loads(line)["message"] for line in open(out / "messages.jsonl")
-                  if '"kind": "start"' in line and '"message"' in line), None)
-    if start and t_go is not None:
-        depart = [start["cars"][str(i)]["depart"] - t_go for i in ids]
-    record = RunRecord(seed=-1, car_ids=ids, radii=[c.radius_m for c in scenario.cars], times=rel_times,
-                       states=states, arrived_at=arrivals(scenario, rel_times, states), depart_at=depart,
-                       trust_times=np.zeros(0), trust=np.zeros(0), transparency=np.zeros(0),
-                       epsilon=np.zeros(0), replan_ms=[], counters=[], inbox=[])
-    stats = {i: _read_json(out / f"car_{i}.json") for i in ids}
-    summary = {"scenario": scenario.name} | motion_summary(scenario, record, build_sdf(scenario.world)) | {
-        "trust": [[1.0 if a == b else _trust(recorder, a, b) for b in ids] for a in ids],
-        "replan_ms": {str(i): _replan_stats(stats[i]) for i in ids},
-        "messages": dict(recorder.counts) | {"dropped_by_recorder": dict(recorder.inbox.dropped)},
-        "messages_per_car": {str(i): dict(recorder.per_sender.get(i, {})) for i in ids},
-        "control": {str(i): (stats[i] or {}).get("control") for i in ids},
-        **_outcomes(ids, stats),
-        "crashed": sorted(int(name.split()[1]) for name in crashed if name.startswith("car"))
-        + (["mocap-sim"] if "mocap-sim" in crashed else []),
-    }
-    return summary
-
-
-def _trust(recorder: Recorder, a: int, b: int) -> float | None:
-    report = recorder.trust.get(a)
-    if report is None or b not in report.peers:
-        return None
-    return round(report.peers[b].trust, 4)
-
-
-def _read_json(path: Path) -> dict | None:
-    try:
-        return json.loads(path.read_text())
-    except (OSError, ValueError):
-        return None
-
-
-def _outcomes(ids: list[int], stats: dict[int, dict | None]) -> dict:
-    """``plans`` and ``deadlocks`` (fleet totals, fleet.runs.plan_outcomes) and
-    ``plan_outcomes`` per car, from each car's own counters."""
-    outcomes = plan_outcomes([(stats[i] or {}).get("agent", {}) for i in ids])
-    per_car = outcomes.pop("outcomes")
-    return outcomes | {"plan_outcomes": {str(i): {k.removeprefix("plans_"): v for k, v in car.items()}
-                                         for i, car in zip(ids, per_car)}}
-
-
-def _replan_stats(stats: dict | None) -> dict | None:
-    if not stats or not stats.get("replan_ms"):
-        return None
-    values = np.array(stats["replan_ms"])
-    return {"count": len(values), "median": round(float(np.median(values)), 2),
-            "p95": round(float(np.percentile(values, 95)), 2), "max": round(float(values.max()), 2)}
-
-
-def print_summary(summary: dict) -> None:
-    ids = summary["car_ids"]
-    print(f"\n== trustfg sim: {summary['scenario']}, cars {ids}")
-    print(f"breaches (pairs closer than the required clearance): {summary['breaches'] or 'none'}")
-    print(f"reached goal: {summary['reached_goal']}, makespan {summary['makespan_s']} s, "
-          f"obstacle clearance {summary['obstacle_min_clearance']} m")
-    print("min distance matrix (m):")
-    print(np.array2string(np.array(summary["min_distance"]), precision=2, suppress_small=True))
-    print("trust matrix (truster row, trustee column):")
-    for a, row in zip(ids, summary["trust"]):
-        print(f"  {a}: " + "  ".join("  -  " if v is None else f"{v:.2f}" for v in row))
-    print("replan ms (median / p95):  " + "  ".join(
-        f"{i}: {r['median']}/{r['p95']}" if r else f"{i}: -" for i, r in summary["replan_ms"].items()))
-    print("plans (verified first try / on retry / fallback), deadlocks:  " + "  ".join(
-        f"{i}: {o['first']}/{o['retry']}/{o['fallback']} {o['deadlocks']}" for i, o in summary["plan_outcomes"].items()))
-    print("commands (Hz, jitter p99 ms): " + "  ".join(
-        f"{i}: {c['rate_hz']}/{c['jitter_ms_p99']}" if c else f"{i}: -" for i, c in summary["control"].items()))
-    print("cpu (share of one core, whole run / go to first arrival): " + "  ".join(
-        f"{name}: {c['share']}/{c.get('share_go_first_arrival')}" if c else f"{name}: -"
-        for name, c in summary.get("cpu", {}).items()))
-    print(f"messages: {summary['messages']}")
-    if "liar_id" in summary:
-        print(f"liar {summary['liar_id']}: min distance from honest cars {summary['liar_min_distance']}")
-    print(f"crashed: {summary['crashed'] or 'none'}")
 
 
 def _port_free(port: int) -> bool:
@@ -392,8 +272,16 @@ def main(argv: list[str] | None = None) -> int:
                         help="a scenario file, or a shipped scene's name (default: intersection, or "
                              "intersection-8 for more than 4 cars)")
     parser.add_argument("--cars", type=int, default=None, help="use the first N cars of the scenario")
-    parser.add_argument("--liar", type=int, default=None, help="car id that publishes falsified plans")
-    parser.add_argument("--misinformation", type=float, default=0.4, help="the liar's fraction of false plans")
+    parser.add_argument("--liar", type=int, action="append", default=None, metavar="ID",
+                        help="a car that lies (repeatable: --attack collude needs two)")
+    parser.add_argument("--attack", default=PAPER_LIAR,
+                        help=f"how the liars lie: {', '.join(ATTACKS)}, or several joined by + (default %(default)s)")
+    parser.add_argument("--attack-param", action="append", default=[], metavar="KEY=NUMBER",
+                        help="an attack parameter (repeatable), e.g. --attack-param bias_m=0.14")
+    parser.add_argument("--misinformation", type=float, default=None,
+                        help="the liar's fraction of false plans, for attacks with one (default 0.4)")
+    parser.add_argument("--clock-offset", action="append", default=[], metavar="ID=SECONDS",
+                        help="run car ID's process with a clock that far ahead of the fleet's (tests; repeatable)")
     parser.add_argument("--out", type=Path, default=None, help="run folder (default runs/sim-<time>)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the departures and cruise speeds")
     parser.add_argument("--timeout", type=float, default=None, help="seconds after the start (default: scenario's + 15)")
@@ -413,13 +301,14 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.cars is not None and args.cars < 1:
         parser.error("--cars must be at least 1")
-    if not 0.0 <= args.misinformation <= 1.0:
+    if args.misinformation is not None and not 0.0 <= args.misinformation <= 1.0:
         parser.error("--misinformation must be within [0, 1]")
     if args.laps is not None and args.laps < 1:
         parser.error("--laps must be at least 1")
     fleet = configured("trustfg sim", lambda: with_deadman(loopback_fleet(
-        load_scenario(args.scenario or default_scenario(args.cars)), args.cars, args.liar, args.misinformation),
-        args.deadman))
+        load_scenario(args.scenario or default_scenario(args.cars)), args.cars, args.liar, args.misinformation,
+        attack=parse_attack(args.attack, args.attack_param),
+        clock_offsets=parse_id_values(args.clock_offset, "--clock-offset")), args.deadman))
     if args.laps is not None:
         fleet = dataclasses.replace(fleet, control=dataclasses.replace(fleet.control, laps=args.laps))
     out = args.out or Path("runs") / time.strftime("sim-%Y%m%d-%H%M%S")

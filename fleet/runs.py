@@ -43,6 +43,9 @@ class RunRecord:
     final_plans: list[tuple[np.ndarray, np.ndarray]] = field(default_factory=list)
     plan_log: list = field(default_factory=list)
     """(t, car index, Plan) of every replan, when simulate(keep_plans=True)."""
+    first_lie_s: list = field(default_factory=list)
+    """Per car: when it first published a plan false by more than plan_reject_m within
+    what the audit holds it to (agent.attacks.Liar; liars only; None: never)."""
 
 
 def arrivals(scenario: Scenario, times: np.ndarray, states: np.ndarray) -> list[float | None]:
@@ -70,13 +73,17 @@ def motion_summary(scenario: Scenario, record: RunRecord, sdf: SignedDistanceFie
         "makespan_s": round(max(arrived), 3) if all(reached) else None,
         "inconsistency": round(metrics.inconsistency_index(record.times, record.states, record.depart_at, arrived), 4),
     }
-    liars = [c.id for c in scenario.cars if c.misinformation > 0]
+    liars = scenario.liars
     if liars:
-        liar = record.car_ids.index(liars[0])
+        lying = [record.car_ids.index(car_id) for car_id in liars]
         honest = [i for i, car_id in enumerate(record.car_ids) if car_id not in liars]
         run["liar_id"] = liars[0]
+        run["liar_ids"] = liars
         run["honest_ids"] = [record.car_ids[i] for i in honest]
-        run["liar_min_distance"] = [round(float(distance[i, liar]), 4) for i in honest]
+        run["liar_min_distance"] = [round(float(min(distance[i, j] for j in lying)), 4) for i in honest]
+        run["liar_min_clearance"] = round(float(min((clearance[i, j] for i in honest for j in lying),
+                                                    default=np.inf)), 4)
+        run["liar_breaches"] = [pair for pair in run["breaches"] if (pair[0] in liars) != (pair[1] in liars)]
     return run
 
 

@@ -25,3 +25,26 @@ def test_unknown_command_and_bad_arguments():
     bad = subprocess.run([sys.executable, "-m", "trustfg", "experiment", "proximity", "--seeds", "0"],
                          capture_output=True, text=True)
     assert bad.returncode == 2 and "--seeds" in bad.stderr
+
+
+def test_studies_write_their_tables(tmp_path):
+    """The adversaries experiment and the transparency sweep, one seed each, end to end."""
+    done = subprocess.run(
+        [sys.executable, "-m", "trustfg", "experiment", "adversaries", "--seeds", "1", "--scenes", "intersection",
+         "--attacks", "displaced", "--variants", "on", "off", "--held-out", "--jobs", "1", "--out", str(tmp_path)],
+        capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    report = json.loads((tmp_path / "adversaries" / "metrics.json").read_text())
+    cell = report["summary"]["intersection"]["displaced"]["on"]
+    assert cell["runs"] == 1 and cell["breach_rate"]["ci"] is not None
+    assert "| intersection | displaced | off |" in (tmp_path / "adversaries" / "table.md").read_text()
+    done = subprocess.run(
+        [sys.executable, "-m", "trustfg", "experiment", "transparency-sweep", "--seeds", "1", "--scene", "intersection",
+         "--misinformation", "0.4", "--gains", "2", "--jobs", "1", "--out", str(tmp_path)],
+        capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    report = json.loads((tmp_path / "transparency-sweep" / "metrics.json").read_text())
+    assert set(report["summary"]["0.4"]) == {"off", "on@2", "wide@2"}
+    bad = subprocess.run([sys.executable, "-m", "trustfg", "experiment", "adversaries", "--scenes", "nowhere"],
+                         capture_output=True, text=True)
+    assert bad.returncode == 2 and "nowhere" in bad.stderr and "Traceback" not in bad.stderr

@@ -14,7 +14,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from .checks import ConfigError, parse_udp_address, positive, with_overrides
+from .attacks import ATTACKS, PAPER_LIAR, AttackConfig, liar_attack, parse_attack
+from .checks import ConfigError, parse_id_values, parse_udp_address, positive, with_overrides
 from .planning import DeadlockConfig, PlannerConfig, TrustConfig, VerifyConfig
 from .running import (
     BusConfig,
@@ -32,6 +33,7 @@ __all__ = [
     "VerifyConfig", "DeadlockConfig",
     "BusConfig", "ControlConfig", "GuardConfig", "NatNetConfig", "OperatorConfig", "TrackingConfig", "VehicleConfig",
     "CarConfig", "Obstacle", "SafetyConfig", "SimConfig", "WorldConfig", "Scenario", "PALETTE",
+    "ATTACKS", "AttackConfig", "PAPER_LIAR", "liar_attack", "parse_attack", "parse_id_values",
 ]
 
 
@@ -72,9 +74,21 @@ class Scenario:
         for name in ("world", "safety", "planner", "trust", "verify", "deadlock", "vehicle", "tracking", "guard", "sim",
                      "control", "bus", "natnet", "operator"):
             getattr(self, name).validate(prefix + name)
+        if self.safety.peer_margin_m < self.trust.transparency_tolerance_m:
+            # A liar can bias its plans by anything under the tolerance unnoticed (it reads
+            # as pose noise); the margin every plan keeps beyond the breach distance must
+            # cover that bias, or an undetectable lie could lead a peer into a breach.
+            raise ConfigError(f"{prefix}safety.peer_margin_m ({self.safety.peer_margin_m}) must be at least "
+                              f"trust.transparency_tolerance_m ({self.trust.transparency_tolerance_m}): the margin "
+                              "must cover what a liar can bias its plans by unnoticed")
         if self.operator.deadman_s and self.control.start_timeout_s:
             raise ConfigError(f"{prefix}control.start_timeout_s: a car cannot drive without a start while "
                               f"operator.deadman_s asks it to hear the operator (set one of them to 0)")
+
+    @property
+    def liars(self) -> list[int]:
+        """Ids of the cars that run an attack."""
+        return [car.id for car in self.cars if car.attack is not None]
 
     def car(self, car_id: int) -> CarConfig:
         for car in self.cars:

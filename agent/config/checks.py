@@ -31,3 +31,17 @@ def parse_udp_address(text: str, path: str = "address") -> tuple[str, int]:
 def positive(value: float, path: str) -> None:
     if not value > 0:
         raise ConfigError(f"{path}: must be > 0, got {value}")
+
+
+def parse_id_values(texts: list[str] | tuple[str, ...], option: str) -> dict[int, float]:
+    """``["2=0.3", ...]`` (car id = number, from a command line) -> {2: 0.3, ...}."""
+    out = {}
+    for text in texts:
+        car, sep, value = text.partition("=")
+        try:
+            out[int(car)] = float(value)
+        except ValueError:
+            raise ConfigError(f"{option} {text!r}: expected ID=NUMBER") from None
+        if not sep:
+            raise ConfigError(f"{option} {text!r}: expected ID=NUMBER")
+    return out

@@ -126,9 +126,50 @@ class TrustConfig:
     """g(tau) ranges from 1 (tau >= tau_full) to this (tau <= tau_floor)."""
     tau_full: float = 0.9
     tau_floor: float = 0.5
+    epsilon_quantile: float = 0.1
+    """Epsilon is set by this lower quantile of the transparency belief, not its mean: a
+    peer we know little about is kept as far as its 10 % worst case deserves, and only a
+    long record of truth earns eps_0 (0.5: about the mean)."""
+    reject_plans: bool = True
+    """Refuse what cannot be believed: plans that miss where their sender is seen (now or
+    when their time comes), stamps from the future, and plans not yet checked are planned
+    against at the widest epsilon. Off: every plan is believed as it comes (the paper's
+    baseline); evidence and trust are still gathered."""
+    clock_tolerance_s: float = 0.5
+    """A plan stamped more than this ahead of our clock when it arrives is refused and
+    counted (a transparency failure); a peer's clock offset is estimated and corrected
+    within +- this."""
+    clock_window_s: float = 10.0
+    """A peer's clock offset is estimated from the stamps of its messages of this long."""
+    audit_period_s: float = 0.2
+    """An accepted plan is compared with where its sender is seen every this many seconds
+    of its future, as each time comes (agent.audit)."""
+    audit_horizon_s: float = 3.0
+    """... up to this far past its stamp,"""
+    audit_notice_s: float = 0.5
+    """... and only until this long after its sender's next plan: a car that changes its
+    mind and says so this far ahead is not held to its old plan. A car cannot escape the
+    audit by planning often: the newest plan at least this old is always held to."""
+    audit_grace_s: float = 0.3
+    """A future moment is audited only this long after it has been observed, so that a
+    newer plan delayed in the network (TCP under loss) has arrived to excuse it."""
+    audit_tolerance_growth_mps: float = 0.15
+    """The audit's tolerance at lag h is transparency_tolerance_m + h * this (and the
+    rejection threshold plan_reject_m + h * this): honest plans' futures change as their
+    cars replan (measured on honest runs: up to 0.34 m at 1 s, 0.50 m at 2 s in the
+    8-car intersection; 0.12 m and 0.15 m in the 4-car scenes)."""
+    audit_max_plans: int = 32
+    """Plans kept per peer for the audit (bounded memory: 5 plans/s over 3 s is 15)."""
+    testimony_max_evidence: float = 60.0
+    """A testimony counts at most this much evidence per dimension (about what 10 pieces
+    a second saturate at with forgetting 0.85: 10 / -ln 0.85 = 62); more is inflation."""
+    blame_closing_mps: float = 0.05
+    """Of two cars closer than the breach distance, a car is blamed (a safety failure)
+    only if it closes the gap faster than this: a car tailgated or stood still is not."""
     epsilon_gain_fixed: float = 1.0
     """g for every peer when the transparency factor is off (planner.transparency = false):
-    1 keeps eps_0 from everyone; the bank's "wide" baseline keeps 2 eps_0."""
+    1 keeps eps_0 from everyone (the paper's baseline); a uniformly careful fleet (the
+    bank's "wide", the adversaries' "wide") keeps a wider berth from everyone."""
 
     def validate(self, path: str) -> None:
         if not 0.0 < self.forgetting <= 1.0:
@@ -141,9 +182,16 @@ class TrustConfig:
             raise ConfigError(f"{path}.failure_weight/consistency_failure_weight: must be > 0")
         if self.epsilon_gain_max < 1.0 or self.epsilon_gain_fixed < 1.0:
             raise ConfigError(f"{path}.epsilon_gain_max/epsilon_gain_fixed: must be >= 1")
+        if not 0.0 < self.epsilon_quantile < 1.0:
+            raise ConfigError(f"{path}.epsilon_quantile: must be within (0, 1)")
+        if self.audit_max_plans < 1:
+            raise ConfigError(f"{path}.audit_max_plans: must be >= 1")
+        if self.audit_tolerance_growth_mps < 0 or self.blame_closing_mps < 0 or self.audit_grace_s < 0:
+            raise ConfigError(f"{path}.audit_tolerance_growth_mps/blame_closing_mps/audit_grace_s: must be >= 0")
         for name in (
             "transparency_tolerance_m", "plan_reject_m", "consistency_tolerance_mps2",
-            "evidence_period_s", "stale_after_s", "testimony_deviation",
+            "evidence_period_s", "stale_after_s", "testimony_deviation", "clock_tolerance_s",
+            "clock_window_s", "audit_period_s", "audit_horizon_s", "audit_notice_s", "testimony_max_evidence",
         ):
             positive(getattr(self, name), f"{path}.{name}")
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from .attacks import AttackConfig
 from .checks import ConfigError, parse_udp_address, positive
 
 
@@ -62,11 +63,12 @@ class CarConfig:
     """Heading at the start; default: towards the first via point (or the goal)."""
     radius_m: float = 0.1
     color: str = ""
-    misinformation: float = 0.0
-    """Fraction of this car's plan messages that are falsified (see agent.misbehaviour)."""
-    false_testimony: bool = False
-    """If true, this car's trust reports lie: they swap success and failure evidence
-    about every peer (see agent.misbehaviour)."""
+    attack: AttackConfig | None = None
+    """How this car lies (experiments only; agent.attacks, config.attacks); none: honest."""
+    clock_offset_s: float = 0.0
+    """Simulation and tests only: this car's clock runs this far ahead of the fleet's (both
+    simulations add it to every time the car reads). In the lab a clock is what NTP makes
+    it, and this stays 0."""
     rigid_body: int = 0
     """Its NatNet rigid-body id in Motive; 0 means the same as ``id``."""
     link: str = ""
@@ -110,8 +112,10 @@ class CarConfig:
         if self.link_key and (len(self.link_key) != 64 or any(c not in "0123456789abcdefABCDEF" for c in self.link_key)):
             raise ConfigError(f"{path}.link_key: expected 64 hexadecimal digits")
         positive(self.radius_m, f"{path}.radius_m")
-        if not 0.0 <= self.misinformation <= 1.0:
-            raise ConfigError(f"{path}.misinformation: must be within [0, 1]")
+        if self.attack is not None:
+            self.attack.validate(f"{path}.attack")
+        if not abs(self.clock_offset_s) <= 60.0:
+            raise ConfigError(f"{path}.clock_offset_s: must be within [-60, 60] s")
 
 
 @dataclass(frozen=True)

@@ -195,8 +195,10 @@ function renderCars(cars) {
     const tr = document.createElement("tr");
     tr.dataset.car = c.id;
     const rate = k => (c.rates[k] ?? 0).toFixed(1);
+    const clock = c.clock_offset_ms === null || c.clock_offset_ms === undefined ? "–"
+      : `${c.clock_offset_ms >= 0 ? "+" : ""}${c.clock_offset_ms.toFixed(0)}`;
     for (const v of [c.id, c.at_goal ? "arrived" : (c.state ?? "–"), c.replan_ms ?? "–", rate("plan"), rate("pose"),
-                     rate("trust"), c.last_heard_s === null ? "never" : `${c.last_heard_s.toFixed(1)} s ago`,
+                     rate("trust"), clock, c.last_heard_s === null ? "never" : `${c.last_heard_s.toFixed(1)} s ago`,
                      outcomes(c.outcomes)]) {
       tr.insertCell().textContent = v;
     }

@@ -77,17 +77,27 @@ def test_a_car_that_does_not_do_what_it_announced_is_inconsistent(intersection, 
 
 
 @pytest.mark.parametrize("seed", SEEDS)
-def test_lost_and_delayed_plans_add_no_inconsistency(intersection, intersection_sdf, seed):
+def test_a_change_of_mind_announced_at_once_is_not_inconsistency(intersection, intersection_sdf, seed):
     """The peer cruises, changes its mind at t = 3 s and brakes, which it announces at once
-    (and not before). With every plan on
-    time, only the windows straddling the change count against it; when the plans of
-    2.8..4.0 s are held up and arrive in one burst at 4.0 s (TCP under heavy loss), the
-    windows we could not judge must add nothing."""
+    (and not before). Judged against the plan made before the change, the windows
+    straddling it would count (1.2-2.0 over seeds 0-3 without the rule); the plan that
+    announced the change excuses them."""
+    state = braking_at(3.0)
+    intends = lambda s: plan_of(cruising if s < 3.0 else state, s)  # noqa: E731
+    assert consistency_failures(intersection, intersection_sdf, seed, state, intends, on_time) <= 0.25
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_lost_and_delayed_plans_add_no_inconsistency(intersection, intersection_sdf, seed):
+    """The same change, but the plans of 2.8..4.0 s are held up and arrive in one burst at
+    4.0 s (TCP under heavy loss), or are lost. The windows straddling the change, judged
+    against the last plan heard while it is fresh (one replan period + margin), can count
+    -- the change was never announced to us; the windows we could not judge must add
+    nothing, so the total stays below the straddling windows' worth with the announcement
+    (1.2-2.0 without the excusing rule)."""
     state = braking_at(3.0)
     intends = lambda s: plan_of(cruising if s < 3.0 else state, s)  # noqa: E731
     delayed = lambda s: 4.0 if 2.8 <= s < 4.0 else on_time(s)  # noqa: E731
     lost = lambda s: None if 2.8 <= s < 4.0 else on_time(s)  # noqa: E731
-    baseline = consistency_failures(intersection, intersection_sdf, seed, state, intends, on_time)
     for delivery in (delayed, lost):
-        assert consistency_failures(intersection, intersection_sdf, seed, state, intends, delivery) \
-            <= baseline + 0.25
+        assert consistency_failures(intersection, intersection_sdf, seed, state, intends, delivery) <= 1.0

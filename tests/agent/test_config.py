@@ -49,7 +49,15 @@ def test_defaults_fill_what_a_file_leaves_out():
                             {"id": 1, "start": [0, 1], "goal": [1, 0]}]}, "car ids must be unique"),
     ({"name": "t", "cars": []}, "cars: a scenario needs at least one car"),
     ({"cars": [{"id": 1, "start": [0, 0], "goal": [1, 1]}]}, "name: missing required key"),
-    (minimal(cars=[{"id": 1, "start": [0, 0], "goal": [1, 1], "misinformation": 2.0}]), "misinformation"),
+    (minimal(cars=[{"id": 1, "start": [0, 0], "goal": [1, 1], "attack": {"name": "displaced", "params": {"p": 2.0}}}]),
+     "attack.params.p"),
+    (minimal(cars=[{"id": 1, "start": [0, 0], "goal": [1, 1], "attack": {"name": "nonsense"}}]), "attack.name"),
+    (minimal(cars=[{"id": 1, "start": [0, 0], "goal": [1, 1], "attack": {"name": "bias", "params": {"p": 0.5}}}]),
+     "attack.params.p"),
+    # a liar can bias its plans by anything under the tolerance unnoticed: the margin must cover it
+    (minimal(safety={"peer_margin_m": 0.1}), "safety.peer_margin_m (0.1) must be at least trust.transparency_tolerance_m"),
+    (minimal(sim={"message_loss": 1.0}), "sim.message_loss"),
+    (minimal(cars=[{"id": 1, "start": [0, 0], "goal": [1, 1], "clock_offset_s": 100.0}]), "cars[0].clock_offset_s"),
 ])
 def test_bad_config_names_the_key(data, message):
     with pytest.raises(ConfigError) as info:
@@ -102,8 +110,14 @@ def test_config_is_immutable(intersection):
         intersection.planner.qc = 3.0  # type: ignore[misc]
 
 
-def test_dump_and_load_round_trip(tmp_path, lab):
+@pytest.mark.parametrize("changed_only", [False, True])
+def test_dump_and_load_round_trip(tmp_path, lab, changed_only):
+    """Also with a liar: an attack (a table with a required name) is written whole."""
+    from trustfg.agent.config import AttackConfig
     from trustfg.agent.scenario_files import dump_scenario
-    path = tmp_path / "again.toml"
-    path.write_text(dump_scenario(lab))
-    assert load_scenario(path) == lab
+    liar = dataclasses.replace(lab, cars=tuple(
+        dataclasses.replace(c, attack=AttackConfig("bias", {"bias_m": 0.1})) if c.id == 1 else c for c in lab.cars))
+    for scenario in (lab, liar):
+        path = tmp_path / "again.toml"
+        path.write_text(dump_scenario(scenario, changed_only=changed_only))
+        assert load_scenario(path) == scenario

@@ -1,9 +1,9 @@
 import numpy as np
 import pytest
 
-from trustfg.agent.config import TrustConfig
+from trustfg.agent.attacks import Liar
+from trustfg.agent.config import AttackConfig, TrustConfig
 from trustfg.agent.messages import PeerTrust, TrustReport
-from trustfg.agent.misbehaviour import falsify_testimony
 from trustfg.agent.trust import TRANSPARENCY, TrustBook, epsilon_gain, expected, graded
 
 
@@ -106,7 +106,7 @@ def test_lying_testimonies_do_not_sink_an_honest_peer():
         book.record(3, TRANSPARENCY, 0.0, 1.0, 4.0 + 0.1 * k)
     now = 8.0
     honest = TrustReport(2, 1, now, {4: PeerTrust((30.0,) * 3, (0.0,) * 3, (0.97,) * 3, 0.97, 0.45)})
-    slander = falsify_testimony(honest)
+    slander = Liar(3, AttackConfig("false-testimony"), np.random.default_rng(0)).testimony(honest)
     slander = TrustReport(3, 1, now, slander.peers)
     book.receive(slander)
     assert book.trust(4, now) > 0.8
@@ -120,3 +120,52 @@ def test_self_testimony_and_testimony_about_the_receiver_are_ignored():
     book.receive(report(3, 1, 0.0, 100.0))  # 3 about us
     assert np.allclose(book.tau(2, 4.0), before)
     assert 1 not in book.direct
+
+
+def cumulative_fusion(book, peer, now):
+    """Fusion as it was before: every accepted testimony's discounted evidence is added to
+    our own (no cap, no averaging, no "only more careful") -- the defences removed."""
+    c = book.config
+    own = book.opinion(peer, now)
+    book._decay(own, now)
+    alpha, beta = own.alpha.copy(), own.beta.copy()
+    own_amount = (own.alpha - c.prior_alpha) + (own.beta - c.prior_beta)
+    for reporter, (report, _) in book.testimonies.items():
+        if reporter in (peer, book.owner) or peer not in report.peers:
+            continue
+        r, s = np.array(report.peers[peer].alpha), np.array(report.peers[peer].beta)
+        said = expected(r + c.prior_alpha, s + c.prior_beta)
+        ok = ~((own_amount >= c.testimony_min_evidence) & (np.abs(said - own.tau()) > c.testimony_deviation))
+        weight = book.discount(reporter, now)
+        alpha, beta = alpha + np.where(ok, weight * r, 0.0), beta + np.where(ok, weight * s, 0.0)
+    return alpha, beta
+
+
+def saying(sender, peer, alpha, beta):
+    return TrustReport(sender, 1, 4.0, {peer: PeerTrust((alpha,) * 3, (beta,) * 3, (0.5,) * 3, 0.5, 0.45)})
+
+
+@pytest.mark.parametrize("fusion, holds", [(None, True), (cumulative_fusion, False)])
+def test_the_same_evidence_is_not_counted_once_per_reporter(fusion, holds, monkeypatch):
+    """Three reporters (trusted) shade an honest peer just inside the deviation test: 40
+    successes and 15 failures each, where we saw only successes. Added up, three voices
+    sink it below 0.8; averaged as the dependent evidence it is, it stays trusted."""
+    if fusion is not None:
+        monkeypatch.setattr(TrustBook, "_fuse", fusion)
+    book = trusted_book(peers=(2, 3, 4, 5), n=40)
+    for reporter in (2, 3, 4):
+        book.receive(saying(reporter, 5, 40.0, 15.0), now=4.0)
+    assert (book.trust(5, 4.0) > 0.8) == holds
+
+
+@pytest.mark.parametrize("fusion, holds", [(None, True), (cumulative_fusion, False)])
+def test_colluders_cannot_vouch_for_each_other(fusion, holds, monkeypatch):
+    """Car 5 has just lied to us once (too little evidence for the deviation test); its
+    partner 4, trusted so far, vouches for it with 60 successes. Praise may not raise trust."""
+    if fusion is not None:
+        monkeypatch.setattr(TrustBook, "_fuse", fusion)
+    book = trusted_book(peers=(2, 3, 4), n=40)
+    book.record(5, TRANSPARENCY, 0.0, 1.0, 4.0)
+    before = book.trust(5, 4.0)
+    book.receive(saying(4, 5, 60.0, 0.0), now=4.0)
+    assert (book.trust(5, 4.0) <= before + 1e-9) == holds

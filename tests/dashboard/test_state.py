@@ -72,6 +72,20 @@ def test_cars_without_a_colour_take_the_palette_in_order(intersection):
     assert [view.cars[c.id].color for c in plain.cars] == [css_color(name) for name in PALETTE[:len(plain.cars)]]
 
 
+def test_a_car_whose_clock_is_off_is_shown_and_alerted(intersection):
+    """Each peer's status carries its estimate of car 2's clock; the page shows the median
+    and alerts past CLOCK_ALERT_S; a car a few ms off is not alerted."""
+    from trustfg.fleet.car_report import clock_counters
+    view = FleetView(intersection)
+    for reporter, seen in ((1, {2: 0.31, 3: -0.002}), (3, {2: 0.29}), (4, {2: 0.30, 3: 0.003})):
+        view.update(messages.StatusMessage(reporter, 1, 1.0, "driving", 5.0, 1, False, clock_counters(seen)), 1.0)
+    cars = {c["id"]: c for c in view.snapshot()["cars"]}
+    assert cars[2]["clock_offset_ms"] == 300.0 and abs(cars[3]["clock_offset_ms"]) < 5
+    assert cars[1]["clock_offset_ms"] is None
+    alerts = {(a["kind"], tuple(a["cars"])) for a in view.alerts()}
+    assert ("clock", (2,)) in alerts and ("clock", (3,)) not in alerts
+
+
 def test_each_car_shows_how_its_replans_ended(intersection):
     view = FleetView(intersection)
     assert view.snapshot()["cars"][0]["outcomes"] is None

@@ -23,6 +23,7 @@ def test_the_baselines_are_config_changes_of_the_same_scene():
     wide = variant(data, METHODS["wide"].overrides, parse_settings(["sim.timeout_s=20"]))
     assert full == load_scenario("corridor-4")
     assert fixed.planner.proximity and not fixed.planner.consistency and not fixed.planner.transparency
+    assert not fixed.trust.reject_plans and not wide.trust.reject_plans  # no trust: every plan believed
     assert wide.sim.timeout_s == 20.0
     eps_0 = full.safety.epsilon_0(0.1, 0.1)
     for scenario, gain in ((fixed, 1.0), (wide, 2.0)):

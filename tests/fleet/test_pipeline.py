@@ -49,9 +49,11 @@ def test_doorway_standoffs_are_resolved_by_giving_way():
     """Two cars set off together at the same speed for a door one car wide: no plan through
     it verifies while the other wants it too, and where the replanning phases do not
     break the tie both stand until one gives way. Without resolution the standoffs never
-    end (the report of issue 9 shows it)."""
+    end (the report of issue 9 shows it). How often the tie is left unbroken depends on the
+    network's draws: with the attack-era plan handling (issue 10) 2 of these 24 seeds stand
+    off (116, 118; with resolution off, 118 never arrives), so the test needs that many."""
     scene = load_scenario(SCENES / "doorway-2.toml")
-    runs = [run_one(scene, seed)[0] for seed in range(100, 106)]
+    runs = [run_one(scene, seed)[0] for seed in range(100, 124)]
     assert all(all(run["reached_goal"]) and not run["breaches"] for run in runs)
     assert sum(1 for run in runs if run["deadlock_yields"]) >= 1
 

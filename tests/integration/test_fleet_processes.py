@@ -4,19 +4,22 @@ import json
 
 import pytest
 
-from trustfg.fleet.launch import loopback_fleet, run
+from trustfg.agent.config import AttackConfig
+from trustfg.fleet.launch import START_LEAD_S, loopback_fleet, run
 
 
 @pytest.fixture(scope="module")
 def honest(intersection, tmp_path_factory):
     out = tmp_path_factory.mktemp("honest")
-    return out, run(loopback_fleet(intersection, None, None, 0.0), out, seed=11)
+    # Car 2's process runs on a clock 0.3 s ahead: an honest car on a bad NTP day.
+    return out, run(loopback_fleet(intersection, None, clock_offsets={2: 0.3}), out, seed=11)
 
 
 @pytest.fixture(scope="module")
 def liar(lab, tmp_path_factory):
     out = tmp_path_factory.mktemp("liar")
-    return out, run(loopback_fleet(lab, None, 1, 0.4), out, seed=12)
+    # The false future: true now, 0.6 m sideways a second later (the audit's job).
+    return out, run(loopback_fleet(lab, None, 1, attack=AttackConfig("false-future+false-testimony")), out, seed=12)
 
 
 def test_four_car_processes_reach_their_goals_without_breach(honest):
@@ -41,10 +44,28 @@ def test_four_car_processes_reach_their_goals_without_breach(honest):
     assert summary["cpu"]["mocap-sim"]["cpu_s"] > 0 and summary["cpu"]["launcher"]["cpu_s"] > 0
 
 
+def test_a_skewed_clock_is_seen_and_forgiven(honest):
+    """Its peers estimate car 2's clock 0.3 s ahead (less the network's least latency) and
+    keep trusting it: its plans are moved onto their clocks before they are checked."""
+    _, summary = honest
+    assert summary["clock_offsets"]["2"] == pytest.approx(300.0, abs=30.0)
+    assert all(abs(summary["clock_offsets"][car]) < 30.0 for car in ("1", "3", "4"))
+    assert summary["honest_trust_min_after_settle"] >= 0.8
+
+
 def test_honest_cars_distrust_a_liar_over_the_network(liar):
+    """Every honest car trusts the liar 0.2 less than every honest peer within 3 s of its
+    departure (from the trust reports heard), and still less at the end. The end is not
+    held to the 0.2 gap: a liar parked at its goal tells no checkable lie, and forgetting
+    (0.85/s) wins back trust while the last car drives on (measured, seed 12: 0.50 when it
+    arrived at 15.4 s, 0.74 at 22.3 s)."""
     out, summary = liar
     assert summary["crashed"] == [] and summary["breaches"] == []
     assert all(summary["reached_goal"])
+    start = next(json.loads(line)["message"] for line in open(out / "messages.jsonl")
+                 if '"kind": "start"' in line and '"message"' in line)
+    departs = start["cars"]["1"]["depart"] - (start["stamp"] + START_LEAD_S)  # after the go, as the summary
+    assert summary["trust_detected_at_s"] is not None and summary["trust_detected_at_s"] <= departs + 3.0, summary
     ids = summary["car_ids"]
     trust = summary["trust"]
     liar_index = ids.index(1)
@@ -52,4 +73,4 @@ def test_honest_cars_distrust_a_liar_over_the_network(liar):
     for a in honest:
         peers = [trust[a][b] for b in honest if b != a]
         assert min(peers) > 0.8, trust[a]
-        assert trust[a][liar_index] <= min(peers) - 0.2, trust[a]
+        assert trust[a][liar_index] < min(peers) - 0.1, trust[a]

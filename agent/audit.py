@@ -1,0 +1,151 @@
+"""Holding plans to what they said: every plan is compared with where its sender is seen,
+at its stamp and then again as each of its future times comes.
+
+A plan message claims where its sender is at its stamp (lag 0) and where it will be after
+(lag h > 0). A car that tells the truth now and lies about later (it announces it yields
+and does not, or its path bends away from where it will drive) passes any check of the
+present; its false future is exposed only when that future comes. So a peer's plans are
+kept (:class:`Ledger`, at most ``audit_max_plans`` per peer, each until its horizon has
+passed) and checked every ``audit_period_s`` of their future, up to ``audit_horizon_s``,
+against the observation of that moment:
+
+    miss(h) = |p_plan(t_stamp + h) - p_seen(t_stamp + h)|
+    tolerance(h) = transparency_tolerance_m + h * audit_tolerance_growth_mps
+    reject(h)    = plan_reject_m            + h * audit_tolerance_growth_mps
+
+The tolerance grows with the lag because an honest car's future changes when it replans
+(measured: up to 0.12-0.15 m at 1-2 s in the 4-car scenes, 0.34-0.50 m in the 8-car
+intersection); a lie of 0.6 m is twice the tolerance at 1 s.
+
+Evidence per plan (agent.trust): the check at lag 0 is one graded piece of transparency
+evidence, success or failure, as before. Later checks can only add failure, and at most
+one failure per plan in all (the worst graded miss so far, the increase recorded as soon
+as it appears): a plan that comes true earns no second success, and a plan that does not
+costs as much as a plan that lied at once. A check whose moment has no observation (the
+peer was not seen then) is skipped.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .config import TrustConfig
+from .gp import Plan
+from .track import NEAREST_S, Track
+
+
+@dataclass
+class Claim:
+    """One received plan (on our clock) and what is left to check of it."""
+
+    plan: Plan
+    stamp: float
+    received: float
+    """When it arrived (our clock)."""
+    times: np.ndarray
+    """Times (ours) to check, ascending; the first is the stamp."""
+    said: np.ndarray
+    """(k, 2) where the plan says its sender is at each of ``times``."""
+    next: int = 0
+    """Index of the first check not done yet."""
+    failure: float = 0.0
+    """Failure already recorded against this plan (at most 1)."""
+    checked_now: bool = False
+    """Whether lag 0 has been checked (the plan verified or refused)."""
+
+
+@dataclass(frozen=True)
+class Check:
+    """One comparison of a claim with an observation."""
+
+    claim: Claim
+    lag_s: float
+    miss_m: float
+    success: float
+    failure: float
+    """Graded evidence to record: at lag 0 both; later only the increase in failure."""
+    rejected: bool
+    """The miss is beyond reject(lag): the plan must not be planned against."""
+
+
+def tolerance(lag_s: float, config: TrustConfig) -> float:
+    return config.transparency_tolerance_m + lag_s * config.audit_tolerance_growth_mps
+
+
+def reject_threshold(lag_s: float, config: TrustConfig) -> float:
+    return config.plan_reject_m + lag_s * config.audit_tolerance_growth_mps
+
+
+def graded_failure(miss_m: float, tolerance_m: float) -> float:
+    """0 up to the tolerance, 1 from twice the tolerance, linear in between."""
+    return min(1.0, max(0.0, (miss_m - tolerance_m) / tolerance_m))
+
+
+@dataclass
+class Ledger:
+    """The plans of one peer that still have something to say."""
+
+    config: TrustConfig
+    claims: deque = field(default_factory=deque)
+    dropped: int = 0
+    """Claims pushed out unchecked by the memory bound."""
+    unverifiable: int = 0
+    """Claims whose stamp came with no observation of the peer to check it against."""
+
+    def add(self, plan: Plan, stamp: float, received: float) -> Claim:
+        c = self.config
+        lags = np.arange(0.0, c.audit_horizon_s + 1e-9, c.audit_period_s)
+        times = stamp + lags
+        times = times[times <= max(plan.t_end, stamp)]
+        claim = Claim(plan, stamp, received, times, plan.position_at(times))
+        self.claims.append(claim)
+        while len(self.claims) > c.audit_max_plans:
+            self.claims.popleft()
+            self.dropped += 1
+        return claim
+
+    def due(self, track: Track | None) -> list[Check]:
+        """Every check whose time our observations of the peer have reached, in order;
+        claims with nothing left are forgotten."""
+        if track is None or track.last_stamp is None:
+            return []
+        c = self.config
+        now_reach = track.last_stamp + NEAREST_S  # lag 0: at once
+        late_reach = track.last_stamp - c.audit_grace_s  # later: once a newer plan had time to arrive
+        out = []
+        claims = list(self.claims)
+        for i, claim in enumerate(claims):
+            superseded = claims[i + 1].stamp + c.audit_notice_s if i + 1 < len(claims) else np.inf
+            start = end = claim.next
+            done = False
+            while end < len(claim.times) and claim.times[end] <= (now_reach if end == 0 else late_reach):
+                if end > 0 and claim.times[end] > superseded:  # a newer plan gave notice of any change
+                    done = True
+                    break
+                end += 1
+            claim.next = len(claim.times) if done else end
+            if end <= start:
+                continue
+            times, said = claim.times[start:end], claim.said[start:end]
+            seen, valid = track.positions_at(times)
+            misses = np.linalg.norm(said - seen, axis=1)
+            for t, miss, ok in zip(times, misses, valid):
+                first = not claim.checked_now
+                claim.checked_now = True
+                if not ok:
+                    self.unverifiable += first
+                    continue  # not seen at that moment: nothing to compare
+                lag = float(t - claim.stamp)
+                fail = graded_failure(float(miss), tolerance(lag, c))
+                if first and lag < 1e-9:
+                    success, failure = 1.0 - fail, fail
+                else:
+                    success, failure = 0.0, max(0.0, fail - claim.failure)
+                claim.failure = max(claim.failure, fail)
+                out.append(Check(claim, lag, float(miss), success, failure, rejected=miss > reject_threshold(lag, c)))
+        while self.claims and self.claims[0].next >= len(self.claims[0].times):
+            self.claims.popleft()
+        return out

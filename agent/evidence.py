@@ -1,0 +1,161 @@
+"""What a car makes of a peer's plans and motion: which plan to believe, and the evidence.
+
+Pure, with no clock of its own: CarAgent hands in what arrived and what was seen, and the
+times (ours) it happened.
+
+A plan message goes through, in order (docs/architecture.md, "Trust"):
+
+1. The peer's clock (agent.clocks): its stamp feeds the peer's offset estimate. A stamp
+   more than ``clock_tolerance_s`` ahead of our clock is refused and counted, and is a
+   transparency failure: a plan from the future cannot be checked, and no honest clock is
+   that far off. Otherwise the plan is moved onto our clock by the estimate.
+2. Too late (older than ``stale_after_s``): dropped unjudged.
+3. The audit (agent.audit): the plan joins its sender's ledger and is checked at its
+   stamp at once if we saw the sender then, else as soon as we do. Until that check, the
+   plan is *unverified*: we keep planning against the last verified plan while it is
+   fresh, and against the unverified one only at the widest epsilon -- never as if it
+   were trusted. A plan that passes is the peer's accepted plan; one that misses by more
+   than ``plan_reject_m`` is refused. A future that does not come true is evidence
+   against its sender (and counted past reject(lag)), which widens its epsilon; the plan
+   is not withdrawn: the newest plan is still the best guess of where the peer goes, and
+   dropping it for a prediction from motion would jolt every plan made around it.
+
+With ``reject_plans`` off (the paper's baseline) every plan is believed as it arrives;
+the evidence is gathered all the same.
+
+Safety evidence blames only the car that closes a gap (:func:`safety_verdict`): of two cars
+closer than their breach distance, one that drives towards the other faster than
+``blame_closing_mps`` fails, one that stands or drives away does not, so a tailgater
+cannot frame the car it follows.
+"""
+
+from __future__ import annotations
+
+from collections import Counter, deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .audit import Ledger
+from .clocks import ClockEstimate
+from .config import TrustConfig
+from .gp import Plan
+from .messages import PlanMessage
+from .track import Motion, Track
+from .trust import TRANSPARENCY
+
+Record = Callable[[int, float, float], None]
+"""record(dimension, success, failure): add a graded piece of evidence about the peer."""
+
+
+@dataclass
+class PeerView:
+    """What we know of one peer."""
+
+    config: TrustConfig
+    latest: PlanMessage | None = None
+    latest_received: float = -np.inf
+    accepted: Plan | None = None
+    """The last plan that was checked and agreed with where the peer was seen (our clock)."""
+    accepted_received: float = -np.inf
+    accepted_stamp: float = -np.inf
+    unverified: Plan | None = None
+    """The newest plan not checked yet (we did not see the peer at its stamp yet)."""
+    unverified_received: float = -np.inf
+    goal: tuple[float, float] | None = None
+    velocities: deque = field(default_factory=lambda: deque(maxlen=64))
+    """(t, observed velocity) at evidence ticks."""
+    history: deque = field(default_factory=lambda: deque(maxlen=32))
+    """(stamp, plan) of the plans accepted lately, in order of arrival (our clock)."""
+    clock: ClockEstimate = field(init=False)
+    """Its clock's offset from ours (agent.clocks)."""
+    ledger: Ledger = field(init=False)
+    """Its plans still being held to their word (agent.audit)."""
+
+    def __post_init__(self) -> None:
+        self.clock = ClockEstimate(self.config.clock_window_s, self.config.clock_tolerance_s)
+        self.ledger = Ledger(self.config)
+
+    def accept(self, plan: Plan, stamp: float, received: float) -> None:
+        self.accepted, self.accepted_received, self.accepted_stamp = plan, received, stamp
+        self.history.append((stamp, plan))
+        if self.unverified is plan:
+            self.unverified = None
+
+
+def retimed(plan: Plan, shift_s: float) -> Plan:
+    """The same plan with every time moved by ``shift_s``."""
+    return Plan(plan.t0 + shift_s, plan.dt, plan.positions, plan.velocities)
+
+
+def take_plan(view: PeerView, message: PlanMessage, now: float, track: Track | None, record: Record,
+              counters: Counter) -> None:
+    """A plan message from the peer arrived at ``now`` (our clock)."""
+    config = view.config
+    view.latest, view.latest_received, view.goal = message, now, message.goal
+    view.clock.add(message.stamp, now)
+    if config.reject_plans and message.stamp - now > config.clock_tolerance_s:
+        counters["plans_future_stamped"] += 1
+        record(TRANSPARENCY, 0.0, 1.0)
+        return
+    stamp = view.clock.to_ours(message.stamp)
+    plan = retimed(message.plan, stamp - message.stamp) if stamp != message.stamp else message.plan
+    if now - stamp > config.stale_after_s:
+        counters["plans_too_late"] += 1  # delayed in the network: no use, no evidence
+        return
+    view.ledger.add(plan, stamp, now)
+    if config.reject_plans:
+        view.unverified, view.unverified_received = plan, now
+    else:
+        view.accept(plan, stamp, now)  # believed as it comes
+    audit(view, track, record, counters)
+
+
+def audit(view: PeerView, track: Track | None, record: Record, counters: Counter) -> None:
+    """Compare the peer's kept plans with what we have seen of it since; act on misses.
+    Counts ``plans_rejected`` (off at the stamp), ``plans_failed_audit`` (a future that did
+    not come true, past reject(lag)) and ``peer_plans_unchecked`` (no observation at the
+    stamp to check against)."""
+    config = view.config
+    unverifiable = view.ledger.unverifiable
+    for check in view.ledger.due(track):
+        if check.success or check.failure:
+            record(TRANSPARENCY, check.success, check.failure)
+        if not config.reject_plans:
+            continue
+        plan = check.claim.plan
+        if check.lag_s < 1e-9:
+            if check.rejected:
+                counters["plans_rejected"] += 1
+                if view.unverified is plan:
+                    view.unverified = None
+            elif view.unverified is plan or check.claim.stamp > view.accepted_stamp:
+                view.accept(plan, check.claim.stamp, check.claim.received)
+        elif check.rejected:
+            counters["plans_failed_audit"] += 1  # its future did not come true: evidence, and counted
+    counters["peer_plans_unchecked"] += view.ledger.unverifiable - unverifiable
+
+
+def belief(view: PeerView, now: float) -> tuple[Plan, bool] | None:
+    """The plan to plan against and whether it is verified; None: predict the peer."""
+    fresh = view.config.stale_after_s
+    if view.accepted is not None and now - view.accepted_received <= fresh:
+        return view.accepted, True
+    if view.unverified is not None and now - view.unverified_received <= fresh:
+        return view.unverified, False
+    return None
+
+
+def safety_verdict(motion: Motion, others: list[tuple[Motion, float]], config: TrustConfig) -> tuple[float, float]:
+    """(success, failure) of a peer's safety: it fails only if it is closer than the breach
+    distance (given per other car) to a car it is closing on."""
+    for other, breach_distance in others:
+        gap = other.position - motion.position
+        distance = float(np.linalg.norm(gap))
+        if distance >= breach_distance:
+            continue
+        closing = float(motion.velocity @ gap) / max(distance, 1e-9)
+        if closing > config.blame_closing_mps:
+            return 0.0, 1.0
+    return 1.0, 0.0

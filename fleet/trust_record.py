@@ -1,0 +1,52 @@
+"""What a run's trust reports say over time: the trust keys both simulations share.
+
+The in-process fleet samples every car's trust directly (fleet.experiments); ``trustfg
+sim`` only hears the trust reports the cars publish, and rebuilds the same keys from them
+here: each car's latest report about a peer holds until its next.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..agent import metrics
+from ..agent.config import Scenario
+
+TRUST_SETTLE_S = 3.0
+"""Honest trust is judged from this long after the start: before, evidence is still coming in."""
+TRUST_GAP = 0.2
+"""A liar is detected when every honest car trusts it this much less than every honest peer."""
+
+
+def trust_over_time(scenario: Scenario, log: list[tuple[float, int, int, float]], t_go: float) -> dict:
+    """The trust keys of the in-process experiments (fleet.experiments.summarise) from the
+    trust reports the observer heard: each car's latest report holds until its next."""
+    ids = [c.id for c in scenario.cars]
+    index = {car: i for i, car in enumerate(ids)}
+    current = np.full((len(ids), len(ids)), np.nan)
+    np.fill_diagonal(current, 1.0)
+    times, matrices = [], []
+    for at, truster, trustee, value in sorted(log):
+        if truster in index and trustee in index:
+            current[index[truster], index[trustee]] = value
+            times.append(at - t_go)
+            matrices.append(current.copy())
+    if not times:
+        return {}
+    times, trust = np.array(times), np.nan_to_num(np.array(matrices), nan=2.0 / 3.0)
+    liars = [index[i] for i in scenario.liars]
+    honest = [i for i in range(len(ids)) if i not in liars]
+    after = times >= TRUST_SETTLE_S
+    pairs = [trust[after][:, a, b] for a in honest for b in honest if a != b]
+    out = {"honest_trust_min_after_settle": round(float(np.min(pairs)), 4) if pairs and after.any() else None}
+    if liars:
+        found = [metrics.trust_detection(times, trust, liar, honest, TRUST_GAP) for liar in liars]
+        out["trust_detected_at_s"] = None if None in found else round(max(found), 2)
+    return out
+
+
+def clock_offsets(stats: dict[int, dict | None], ids: list[int]) -> dict[str, float]:
+    """Per car: the median of its peers' estimates of its clock offset, ms."""
+    seen = {i: [s["clock_offsets_s"][str(i)] for s in stats.values()
+                if s and str(i) in s.get("clock_offsets_s", {})] for i in ids}
+    return {str(i): round(float(np.median(v)) * 1e3, 1) for i, v in seen.items() if v}
