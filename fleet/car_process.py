@@ -265,14 +265,16 @@ class CarProcess:
             sender.send(0.0, 0.0, Flags.STOP | flags)
         elif turn:  # between laps: turning in place towards the next leg
             sender.send(*turn, flags)
-        elif plan is None or not go or link.e_stop:
-            self.control.stops += 1
-            sender.send(0.0, 0.0, Flags.STOP | flags)
-        else:  # the control step both simulations share (bridge.drive)
-            command = drive(plan, now, pose, True, self._others_seen, self.car.radius_m, self.scenario, self.sdf)
-            self.control.guard_limited += command.guard_limited
-            sender.send(command.v, command.omega, flags)
-            self._watch_motion(now, pose, command.v)
+        else:  # the control step both simulations share (bridge.drive): STOP without a plan or leave
+            command = drive(plan, now, pose, go and not link.e_stop, self._others_seen, self.car.radius_m,
+                            self.scenario, self.sdf)
+            if command.stop:
+                self.control.stops += 1
+                sender.send(0.0, 0.0, Flags.STOP | flags)
+            else:
+                self.control.guard_limited += command.guard_limited
+                sender.send(command.v, command.omega, flags)
+                self._watch_motion(now, pose, command.v)
         self.control.sent += 1
 
     def _watch_motion(self, now: float, pose: tuple[float, float, float], v_commanded: float) -> None:
