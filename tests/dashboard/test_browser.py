@@ -88,6 +88,14 @@ def test_the_live_page_draws_the_published_poses_trust_and_alerts(live_run):
             page.goto(f"http://127.0.0.1:{port}/")
             page.wait_for_selector("#connection[data-state='connected']", timeout=20000)
             page.wait_for_function("document.querySelectorAll('circle.car-body[data-x]').length === 4", timeout=60000)
+            # The test's own session joins the cars by connecting to their endpoints; they
+            # start after it, so it hears them only once Zenoh's connect retry gets through.
+            def heard_every_car():
+                published.poll()
+                return all(published.poses[car.id] for car in fleet.cars)
+            t0 = time.monotonic()
+            assert wait_for(heard_every_car, 30.0), f"the test heard poses only from {sorted(published.poses)}"
+            print(f"the test's session heard every car {time.monotonic() - t0:.1f} s after the page drew them")
             # Positions: every drawn car sits where that car recently said it is.
             checked_moving = False
             deadline = time.monotonic() + 40
