@@ -25,7 +25,10 @@ How peers' plans are used (agent.evidence; docs/architecture.md, "Trust"):
   derivative of noisy poses, and one plan for both ends keeps late or bunched messages
   from looking like erratic driving. Without a plan made within one replan period (plus
   REPLAN_MARGIN_S) of the window's start -- lost or delayed messages -- there is no
-  consistency evidence; a change of mind announced at once excuses what follows it.
+  consistency evidence; a change of mind announced at once excuses what follows it. A
+  window is judged ``stale_after_s`` after it ends -- when every plan that could still
+  be believed for it has arrived -- so a plan held up in the network is not read as a
+  car that failed to say what it did (loss and delay cost honest cars no trust).
 
 A liar (``car.attack``, agent.attacks) plans and drives like everyone else and lies in
 what it publishes.
@@ -190,7 +193,8 @@ class CarAgent:
             view = self.peers.get(peer)
             if view is not None:
                 view.velocities.append((motion.stamp, motion.velocity))
-                mismatch = _acceleration_mismatch(view, self.scenario.control.replan_period_s + REPLAN_MARGIN_S)
+                mismatch = _acceleration_mismatch(view, self.scenario.control.replan_period_s + REPLAN_MARGIN_S,
+                                                  now - config.stale_after_s)
                 if mismatch is not None:
                     s, f = graded(mismatch, config.consistency_tolerance_mps2)
                     self.trust.record(peer, CONSISTENCY, s, f, now)
@@ -385,16 +389,22 @@ class CarAgent:
         return self.trust.trust(peer, now)
 
 
-def _acceleration_mismatch(view: PeerView, fresh_s: float) -> float | None:
-    """|mean observed - mean announced acceleration| over the last CONSISTENCY_WINDOW_S,
-    the announcement being the newest accepted plan the peer had made when the window
-    began (by its stamp: a plan that arrived late still tells what the peer meant then);
-    None if that plan is older than ``fresh_s`` then or there are not enough
-    observations yet. A change of mind announced in time is not inconsistency: if a
+def _acceleration_mismatch(view: PeerView, fresh_s: float, until: float) -> float | None:
+    """|mean observed - mean announced acceleration| over the CONSISTENCY_WINDOW_S that
+    ends at the last observation at or before ``until``, the announcement being the newest
+    accepted plan the peer had made when the window began (by its stamp: a plan that
+    arrived late still tells what the peer meant then); None if that plan is older than
+    ``fresh_s`` then or there are not enough observations yet. The caller judges a
+    window only once every plan that could still be believed for it has had time to
+    arrive (``until`` = now - stale_after_s): a plan delayed in the network is judged by
+    as if it had come at once, never read as a car that did not say what it did. A change of mind announced in time is not inconsistency: if a
     plan made since (at least ANNOUNCED_MIN_S ago) announced what the peer did from its
     stamp on, the smaller mismatch counts -- a car that had to brake for a surprise and
     said so at its next replan is consistent; one that says it brakes and does not is not."""
-    t, observed = view.velocities[-1]
+    end = next(((t, v) for t, v in reversed(view.velocities) if t <= until + 1e-9), None)
+    if end is None:
+        return None
+    t, observed = end
     start = next(((t_old, v_old) for t_old, v_old in reversed(view.velocities)
                   if t - t_old >= CONSISTENCY_WINDOW_S - 1e-6), None)
     if start is None:
@@ -407,7 +417,7 @@ def _acceleration_mismatch(view: PeerView, fresh_s: float) -> float | None:
     mismatch = _mismatch(announced[1], t_old, observed_old, t, observed)
     since = [(stamp, p) for stamp, p in view.history if t_old < stamp <= t - ANNOUNCED_MIN_S]
     if since:
-        stamp, plan = since[-1]
+        stamp, plan = max(since, key=lambda sp: sp[0])  # the latest made, whatever came first
         then = min(view.velocities, key=lambda tv: abs(tv[0] - stamp))
         if abs(then[0] - stamp) <= 0.5 * ANNOUNCED_MIN_S:
             mismatch = min(mismatch, _mismatch(plan, then[0], then[1], t, observed))
