@@ -47,6 +47,7 @@ import signal
 import socket
 import sys
 import tempfile
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -84,6 +85,8 @@ class Setup:
     mocap_args: list[str]
     control_port: int
     killed_at: float | None = None
+    stop: threading.Event = field(default_factory=threading.Event)
+    """Set to end the run early (fleet.launch.run's ``stop``), with its summary as usual."""
 
     def control(self, command: dict) -> None:
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
@@ -144,6 +147,18 @@ def _restart(setup: Setup, context: RunContext) -> float | None:
     return None
 
 
+def _end_once_the_others_arrive(setup: Setup, context: RunContext) -> float | None:
+    """With its link cut the victim cannot arrive: end the run once it has been cut,
+    stands, and every other car is at its goal (the timeout is only the backstop)."""
+    status = context.recorder.status if context.recorder else {}
+    cut = any(what.startswith("fault:") for _, what in context.events)
+    others = [i for i in setup.lab.car_ids if i != VICTIM]
+    if cut and context.speed(VICTIM) < 0.01 and all(status.get(i) and status[i].at_goal for i in others):
+        setup.stop.set()
+        return None
+    return 0.5
+
+
 def _link_port(setup: Setup) -> int:
     car = next(c for c in setup.fleet.cars if c.id == VICTIM)
     return int(car.link.rsplit(":", 1)[1])
@@ -163,8 +178,8 @@ CASES = {case.name: case for case in [
         s.control({"occlude": VICTIM, "seconds": 1.0}), c.note(f"fault: occlude car {VICTIM} for 1 s"))))],
         measures_stop=True),
     Case("link-cut", schedule=[(4.0, when_moving(lambda s, c: (
-        s.lab.cut_link(VICTIM, _link_port(s)), c.note(f"fault: cut car {VICTIM}'s command link"))))],
-        measures_stop=True, link_cut=True),
+        s.lab.cut_link(VICTIM, _link_port(s)), c.note(f"fault: cut car {VICTIM}'s command link")))),
+        (4.0, _end_once_the_others_arrive)], measures_stop=True, link_cut=True),
     Case("lossy-clock", prepare=_skewed_clock,
          schedule=[(0.0, lambda s, c: [s.lab.loss(car, 30) for car in s.lab.car_ids])]),
 ]}
@@ -181,7 +196,7 @@ def run_case(case: Case, seed: int, out: Path) -> dict:
         setup.mocap_args.append(f"--control-port={setup.control_port}")
         schedule = [(t, (lambda action: lambda context: action(setup, context))(action)) for t, action in case.schedule]
         timeout = 40.0 if case.link_cut else None
-        summary = run(setup.fleet, out, seed=seed, timeout_s=timeout, mocap_args=tuple(setup.mocap_args),
+        summary = run(setup.fleet, out, seed=seed, timeout_s=timeout, stop=setup.stop, mocap_args=tuple(setup.mocap_args),
                       wrap=lab.wrap, schedule=schedule, infra_ip=lab.infra_ip)
     return measure(case, summary, out)
 

@@ -3,6 +3,8 @@ fallback, the proximity guard and deadlock resolution, over a network that can l
 delay and jitter messages. Seeds 100.. (not the documented runs' seeds)."""
 
 import dataclasses
+import os
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -53,7 +55,9 @@ def test_doorway_standoffs_are_resolved_by_giving_way():
     network's draws: with the attack-era plan handling (issue 10) 2 of these 24 seeds stand
     off (116, 118; with resolution off, 118 never arrives), so the test needs that many."""
     scene = load_scenario(SCENES / "doorway-2.toml")
-    runs = [run_one(scene, seed)[0] for seed in range(100, 124)]
+    seeds = range(100, 124)
+    with ProcessPoolExecutor(max_workers=min(2, os.cpu_count() or 1)) as pool:  # one run per core
+        runs = [run for run, _ in pool.map(run_one, [scene] * len(seeds), seeds)]
     assert all(all(run["reached_goal"]) and not run["breaches"] for run in runs)
     assert sum(1 for run in runs if run["deadlock_yields"]) >= 1
 
