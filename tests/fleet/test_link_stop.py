@@ -9,6 +9,7 @@ import sys
 from trustfg.agent.scenario_files import dump_scenario
 from trustfg.bridge.carlink import SOURCE_OPERATOR, decode_command, decode_command_v2, link_key
 from trustfg.fleet.link_keys import with_link_keys
+from trustfg.fleet.testbed import links_to_sinks
 
 
 def test_the_first_e_stop_reads_links_from_the_file_and_reaches_only_the_named_cars(intersection, tmp_path):
@@ -63,14 +64,8 @@ print(json.dumps({"status": status, "sent": sent}))
 def test_trustfg_stop_sends_its_first_e_stops_before_the_typed_config_and_logging_load(intersection, tmp_path):
     """The cli's fast path (fleet.first_stop): remove it, or set up logging first, and the
     first datagram leaves after those imports."""
-    sinks = [socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in intersection.cars]
+    config, sinks = links_to_sinks(intersection, tmp_path)
     try:
-        for sink in sinks:
-            sink.bind(("127.0.0.1", 0))
-        cars = tuple(dataclasses.replace(car, link=f"udp://127.0.0.1:{sink.getsockname()[1]}")
-                     for car, sink in zip(intersection.cars, sinks))
-        config = tmp_path / "fleet.toml"
-        config.write_text(dump_scenario(with_link_keys(dataclasses.replace(intersection, cars=cars), tmp_path / "keys")))
         done = subprocess.run([sys.executable, "-c", _SPY, "stop", "--config", str(config), "--path", "link",
                                "--repeat", "0.1", "--wait", "0.2"], capture_output=True, text=True, timeout=60)
         report = json.loads(done.stdout.strip().splitlines()[-1])
