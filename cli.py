@@ -2,13 +2,14 @@
 
 Each subcommand lives in its own module with a ``main(argv) -> int``; this module only
 dispatches (importing the one it runs), so ``trustfg car`` does not import the
-dashboard's web stack and the like. It sits above every layer.
+dashboard's web stack and the like. It sits above every layer. ``trustfg stop`` sets up
+logging itself, after its first E_STOPs are out (fleet.first_stop): this module imports
+nothing before it.
 """
 
 from __future__ import annotations
 
 import importlib
-import logging
 import sys
 
 COMMANDS = {
@@ -30,6 +31,12 @@ COMMANDS = {
 }
 
 
+def setup_logging() -> None:
+    import logging
+
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if not argv or argv[0] in ("-h", "--help"):
@@ -42,9 +49,11 @@ def main(argv: list[str] | None = None) -> int:
     if name not in COMMANDS:
         print(f"trustfg: unknown command {name!r} (try 'trustfg --help')", file=sys.stderr)
         return 2
-    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     module = importlib.import_module(COMMANDS[name][0])
     try:
+        if name == "stop":  # the e-stop: logging once its first datagrams are out
+            return int(module.main(rest, ready=setup_logging) or 0)
+        setup_logging()
         return int(module.main(rest) or 0)
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)

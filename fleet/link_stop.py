@@ -14,33 +14,24 @@ of its own: another tool of the operator's may have sent since. On a version-1 l
 operator sends nothing but E_STOP and PING (an ordinary datagram out of the car process's
 sequence would break it: rule 5); there the car process's RELEASE clears the latch.
 
-This module imports nothing heavy (no Zenoh, no numpy, not even the typed config, whose
-dataclasses take tens of milliseconds to build): ``trustfg stop`` reads the cars' links
-and keys straight from the config file (:func:`first_e_stop`) and sends its first E_STOPs
-before anything else loads; the typed config follows and is the authority.
+This module imports nothing heavy (no Zenoh, no numpy, not even the typed config); still,
+``trustfg stop`` sends its first E_STOPs before it loads (fleet.first_stop), and this
+path repeats them.
 """
 
 from __future__ import annotations
 
 import logging
 import time
-import tomllib
-from pathlib import Path
-from types import SimpleNamespace
 from typing import TYPE_CHECKING, Callable, Iterable
 
-from ..bridge.carlink import SOURCE_OPERATOR, Answer, CommandSender, Flags, link_key
+from ..bridge.carlink import E_STOP_FLAGS, SOURCE_OPERATOR, Answer, CommandSender, Flags
+from .first_stop import DIRECT_REPEAT_S
 
 if TYPE_CHECKING:
     from ..agent.config import Scenario
 
 log = logging.getLogger(__name__)
-
-DIRECT_PERIOD_S = 0.02
-"""The direct path repeats its E_STOP at the command rate of a car process (50 Hz)."""
-DIRECT_REPEAT_S = 0.5
-"""... for this long after the stop (25 datagrams: losing a few does not matter)."""
-
 
 def named(fleet: "Scenario", cars: Iterable[int] = ()) -> list[int]:
     """The car ids a command names (none: every car); ValueError for an unknown one."""
@@ -84,7 +75,7 @@ class LinkStopper:
         for car in cars:
             if car in self.senders:
                 self._until[car] = now + repeat_s
-                self.senders[car].send(0.0, 0.0, Flags.E_STOP | Flags.STOP | Flags.PING)
+                self.senders[car].send(0.0, 0.0, E_STOP_FLAGS)
 
     def cancel(self, cars: Iterable[int]) -> None:
         """Stop repeating the e-stop to the named cars (the operator released them: a
@@ -117,7 +108,7 @@ class LinkStopper:
         """Repeat pending e-stops; read answers."""
         for car, until in list(self._until.items()):
             if now < until:
-                self.senders[car].send(0.0, 0.0, Flags.E_STOP | Flags.STOP | Flags.PING)
+                self.senders[car].send(0.0, 0.0, E_STOP_FLAGS)
             else:
                 del self._until[car]
         for car, until in list(self._release_until.items()):
@@ -139,33 +130,3 @@ class LinkStopper:
             sender.close()  # stop_repeats=0: it sends nothing on the way out
         self.senders.clear()
 
-
-def first_e_stop(source: str, cars: Iterable[int] = ()) -> list[int]:
-    """One E_STOP (with PING) to each named car (none: every car) whose ``link`` (and, for
-    version 2, key) a config *file* names, read with tomllib alone; the cars it reached.
-    Anything unexpected (a shipped name, a car without a plain ``udp://HOST:PORT`` link, a
-    key that does not read) is left to the typed path that follows, a few milliseconds
-    later."""
-    try:
-        tables = tomllib.loads(Path(source).read_text(encoding="utf-8")).get("cars", [])
-    except (OSError, ValueError):
-        return []
-    wanted, reached = set(cars), []
-    for table in tables if isinstance(tables, list) else []:
-        car, link = (table.get("id"), table.get("link")) if isinstance(table, dict) else (None, None)
-        if not (isinstance(car, int) and 1 <= car <= 255 and isinstance(link, str) and link.startswith("udp://")):
-            continue
-        host, _, port = link[len("udp://"):].rpartition(":")
-        if (wanted and car not in wanted) or not host or not port.isdigit():
-            continue
-        try:
-            key = link_key(SimpleNamespace(id=car, link_version=table.get("link_version", 2),
-                                           link_key_file=table.get("link_key_file", ""),
-                                           link_key=table.get("link_key", "")))
-            with CommandSender(car, (host.strip("[]"), int(port)), key=key, source=SOURCE_OPERATOR,
-                               stamp_clock=time.time, stop_repeats=0) as sender:
-                sender.send(0.0, 0.0, Flags.E_STOP | Flags.STOP | Flags.PING)
-        except Exception:  # noqa: BLE001 -- anything here is the typed path's to report
-            continue
-        reached.append(car)
-    return reached

@@ -11,6 +11,9 @@ car still driving ends its trial).
 ``--abort`` ends the running trial instead: the cars hold still (STOP, not latched) and
 wait for the next start.
 
+The first E_STOPs leave before anything heavy loads (fleet.first_stop); what follows, the
+typed config and both paths, is imported after them.
+
 It prints, per car, what each path confirmed -- the car process's status on the bus, the
 car's own answer on its link -- and exits with 1 when a named car confirmed on neither.
 """
@@ -20,13 +23,14 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Callable
 
 from .command import command_parser, configured
-from .link_stop import DIRECT_PERIOD_S, DIRECT_REPEAT_S, LinkStopper, first_e_stop, named
+from .first_stop import DIRECT_PERIOD_S, DIRECT_REPEAT_S, first_e_stop
 
 if TYPE_CHECKING:
     from ..agent.config import Scenario
+    from .link_stop import LinkStopper
 
 BUS_JOIN_S = 1.0
 """A release or an abort waits up to this long for the car processes to be seen on the bus."""
@@ -35,7 +39,8 @@ CONFIRMED = {"estop": lambda state: state == "e_stopped", "release": lambda stat
              "abort": lambda state: state not in ("driving", "stuck", "")}
 
 
-def main(argv: list[str] | None = None) -> int:
+def main(argv: list[str] | None = None, ready: Callable[[], None] = lambda: None) -> int:
+    """``ready()`` is called once the first E_STOPs are out (the cli sets up logging there)."""
     issued = time.time()  # the command, as the operator gave it
     parser = command_parser("trustfg stop", __doc__)
     parser.add_argument("--config", required=True, help="fleet config: a TOML file or a shipped name (lab/fleet)")
@@ -59,7 +64,9 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("--repeat and --wait must be >= 0")
     sent_direct = time.time() if action == "estop" and args.path != "bus" and first_e_stop(args.config, args.cars) \
         else None  # the first E_STOPs, before the typed config loads (tens of ms)
-    from ..agent.scenario_files import load_scenario
+    ready()
+    from ..agent.scenario_files import load_scenario  # after the first E_STOPs, as are the paths
+    from .link_stop import LinkStopper, named
 
     fleet = configured("trustfg stop", lambda: load_scenario(args.config))
     try:

@@ -16,6 +16,7 @@ between zero and non-zero, on the fleet clock, at physics resolution):
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import os
 import signal
@@ -207,3 +208,23 @@ class CommandLog:
     def moved_after(self, since: float) -> set[int]:
         """Cars that applied a non-zero command at any moment after ``since``."""
         return {car for t, car, v, omega in self.commands() if t > since and (v or omega)}
+
+
+def links_to_sinks(scenario: Scenario, folder: Path) -> tuple[Path, list[socket.socket]]:
+    """A config file (``folder/fleet.toml``) of ``scenario`` whose cars' links are UDP
+    sockets bound here, one per car in order, with fresh keys (fleet.link_keys): what the
+    operator's tools send straight to the cars arrives there. The caller closes the sockets."""
+    sinks = []
+    try:
+        for _ in scenario.cars:
+            sinks.append(socket.socket(socket.AF_INET, socket.SOCK_DGRAM))
+            sinks[-1].bind(("127.0.0.1", 0))
+    except OSError:
+        for sink in sinks:
+            sink.close()
+        raise
+    cars = tuple(dataclasses.replace(car, link=f"udp://127.0.0.1:{sink.getsockname()[1]}")
+                 for car, sink in zip(scenario.cars, sinks))
+    config = folder / "fleet.toml"
+    config.write_text(dump_scenario(with_link_keys(dataclasses.replace(scenario, cars=cars), folder / "keys")))
+    return config, sinks

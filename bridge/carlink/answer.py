@@ -7,7 +7,7 @@ check``, with motors held: a PING is never applied) and that an e-stop latched
 (``trustfg stop``). The answer echoes the PING's sequence number and stamp, so the asker
 matches it and measures the round trip on its own clock.
 
-Answers are framed as the commands are (:func:`.codec.seal`): a car that speaks version 2
+Answers are framed as the commands are (:func:`.frame.seal`): a car that speaks version 2
 answers in version 2, authenticated with its key (so an answer also proves that the car
 holds the key the operator has), a version-1 car in version 1, with a CRC.
 
@@ -59,7 +59,8 @@ import enum
 import struct
 from dataclasses import dataclass
 
-from .codec import SEQ_MODULUS, SESSION_MODULUS, CarLinkError, _check_int, check_key, open_frame, seal
+from .codec import _check_int
+from .frame import SEQ_MODULUS, SESSION_MODULUS, CarLinkError, check_key, open_frame, seal
 
 ANSWER_MAGIC = b"TA"
 ANSWER_SIZE = 22

@@ -101,62 +101,36 @@ magic, other version, bad MAC, reserved byte not 0, car id 0, non-finite numbers
 flag bits. Which sessions and sequence numbers it accepts (replays, restarts) is in
 :mod:`.receiver`.
 
-What a car does with the commands it decodes is in :mod:`.receiver`.
+What a car does with the commands it decodes is in :mod:`.receiver`. The constants, the
+layouts, the flags and the framing (CRC, MAC) are code in :mod:`.frame`, quick to import;
+this module adds the validated :class:`Command` and the decoders.
 """
 
 from __future__ import annotations
 
-import enum
-import hashlib
-import hmac
 import math
 import operator
 import struct
-import zlib
 from dataclasses import dataclass
 
-MAGIC = b"TF"
-VERSION = 1
-DATAGRAM_SIZE = 30
-VERSION_2 = 2
-DATAGRAM_V2_SIZE = 52
-MAC_BYTES = 16
-KEY_BYTES = 32
-SOURCE_CAR_PROCESS = 0
-SOURCE_OPERATOR = 1
-SEQ_MODULUS = 2**32
-SESSION_MODULUS = 2**64
+from .frame import (
+    COMMAND_BODY,
+    COMMAND_BODY_V2,
+    MAGIC,
+    SEQ_MODULUS,
+    SESSION_MODULUS,
+    SOURCE_CAR_PROCESS,
+    VERSION,
+    VERSION_2,
+    CarLinkError,
+    Flags,
+    check_key,
+    command_datagram,
+    open_frame,
+)
+
 _HALF_SEQ = 2**31
-_BODY = struct.Struct("<2sBBIdffH")  # bytes 0..25, covered by the CRC
-_BODY_V2 = struct.Struct("<2sBBBBHQIdff")  # bytes 0..35, covered by the MAC
-_CRC = struct.Struct("<I")
 _F32 = struct.Struct("<f")
-
-
-class CarLinkError(ValueError):
-    """A car-link datagram or command field is invalid.
-
-    ``reason`` is a short machine-readable tag (``"length"``, ``"magic"``, ``"version"``,
-    ``"crc"``, ``"mac"``, ``"reserved"``, ``"car_id"``, ``"non_finite"``, ``"flags"``,
-    ``"range"``, ``"type"``, ``"key"``) used to count rejections; ``"range"`` and
-    ``"type"`` come only from building a :class:`Command`, ``"key"`` from a bad key.
-    """
-
-    def __init__(self, reason: str, detail: str):
-        super().__init__(f"{reason}: {detail}")
-        self.reason = reason
-
-
-class Flags(enum.IntFlag):
-    """Command flag bits (u16 at offset 24)."""
-
-    NONE = 0
-    E_STOP = 0x0001
-    STOP = 0x0002
-    RELEASE = 0x0004
-    PING = 0x0008
-
-
 _KNOWN_FLAGS = int(Flags.E_STOP | Flags.STOP | Flags.RELEASE | Flags.PING)
 
 
@@ -233,73 +207,26 @@ def _check_float(name: str, value: object, f32: bool = False) -> None:
 
 def encode_command(cmd: Command) -> bytes:
     """The 30-byte datagram of ``cmd`` (v and omega rounded to f32)."""
-    return seal(_BODY.pack(MAGIC, VERSION, cmd.car_id, cmd.seq, cmd.stamp_s, cmd.v_mps,
-                           cmd.omega_radps, int(cmd.flags)))
+    return command_datagram(None, cmd.car_id, cmd.seq, cmd.stamp_s, cmd.v_mps, cmd.omega_radps, cmd.flags)
 
 
 def decode_command(data: bytes | bytearray | memoryview) -> Command:
     """The command in a datagram; raises :class:`CarLinkError` (and nothing else) if invalid."""
-    _, _, car_id, seq, stamp_s, v_mps, omega_radps, flags = open_frame(data, _BODY, MAGIC, VERSION)
+    _, _, car_id, seq, stamp_s, v_mps, omega_radps, flags = open_frame(data, COMMAND_BODY, MAGIC, VERSION)
     return Command(car_id, seq, stamp_s, v_mps, omega_radps, flags)
-
-
-def seal(body: bytes, key: bytes | None = None) -> bytes:
-    """A datagram: its body, then its check -- version 1 the CRC-32 of the body (u32,
-    little-endian), version 2 (with the car's ``key``) the MAC of the body. Commands and
-    answers (:mod:`.answer`) share this framing."""
-    return body + (_CRC.pack(zlib.crc32(body)) if key is None else mac(check_key(key), body))
-
-
-def open_frame(data: object, layout: struct.Struct, magic: bytes, version: int,
-               key: bytes | None = None) -> tuple:
-    """The body fields of a sealed datagram whose body is ``layout`` (starting with the
-    magic and the version), after checking, in this order, type, length, magic, version
-    and the CRC (without ``key``) or the MAC (with it); :class:`CarLinkError` otherwise."""
-    if not isinstance(data, (bytes, bytearray, memoryview)):
-        raise CarLinkError("type", f"expected bytes, got {type(data).__name__}")
-    data = bytes(data)
-    check = _CRC.size if key is None else MAC_BYTES
-    if len(data) != layout.size + check:
-        raise CarLinkError("length", f"{len(data)} bytes, expected {layout.size + check}")
-    fields = layout.unpack_from(data)
-    if fields[0] != magic:
-        raise CarLinkError("magic", f"magic {fields[0]!r}, expected {magic!r}")
-    if fields[1] != version:
-        raise CarLinkError("version", f"version {fields[1]}, this end speaks {version}")
-    body = data[:layout.size]
-    if key is None:
-        (crc,) = _CRC.unpack_from(data, layout.size)
-        if crc != zlib.crc32(body):
-            raise CarLinkError("crc", f"crc 0x{crc:08x}, computed 0x{zlib.crc32(body):08x}")
-    elif not hmac.compare_digest(data[layout.size:], mac(key, body)):
-        raise CarLinkError("mac", "the MAC does not verify: wrong key, or altered or forged")
-    return fields
-
-
-def check_key(key: object) -> bytes:
-    """A car's link key: exactly KEY_BYTES bytes (else :class:`CarLinkError`, reason "key")."""
-    if not isinstance(key, (bytes, bytearray)) or len(key) != KEY_BYTES:
-        raise CarLinkError("key", f"a car-link key is {KEY_BYTES} bytes, got "
-                           f"{len(key) if isinstance(key, (bytes, bytearray)) else type(key).__name__}")
-    return bytes(key)
-
-
-def mac(key: bytes, body: bytes) -> bytes:
-    """The version-2 tag: HMAC-SHA256(key, body) truncated to MAC_BYTES."""
-    return hmac.new(key, body, hashlib.sha256).digest()[:MAC_BYTES]
 
 
 def encode_command_v2(cmd: Command, key: bytes) -> bytes:
     """The 52-byte authenticated datagram of ``cmd`` (v and omega rounded to f32)."""
-    return seal(_BODY_V2.pack(MAGIC, VERSION_2, cmd.car_id, cmd.source, 0, int(cmd.flags), cmd.session,
-                              cmd.seq, cmd.stamp_s, cmd.v_mps, cmd.omega_radps), key)
+    return command_datagram(check_key(key), cmd.car_id, cmd.seq, cmd.stamp_s, cmd.v_mps, cmd.omega_radps,
+                            cmd.flags, cmd.session, cmd.source)
 
 
 def decode_command_v2(data: bytes | bytearray | memoryview, key: bytes) -> Command:
     """The command in an authenticated datagram; raises :class:`CarLinkError` (and nothing
     else) if it is invalid or its MAC does not verify with ``key``."""
     (_, _, car_id, source, reserved, flags, session, seq, stamp_s, v_mps,
-     omega_radps) = open_frame(data, _BODY_V2, MAGIC, VERSION_2, key)
+     omega_radps) = open_frame(data, COMMAND_BODY_V2, MAGIC, VERSION_2, key)
     if reserved != 0:
         raise CarLinkError("reserved", f"reserved byte is 0x{reserved:02x}, must be 0")
     return Command(car_id, seq, stamp_s, v_mps, omega_radps, flags, session, source)

@@ -10,14 +10,12 @@ for throw-away runs, inline (``cars[].link_key``). The car's firmware holds the 
 
 from __future__ import annotations
 
-import logging
 import os
-import secrets
 import stat
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from .codec import KEY_BYTES
+from .frame import KEY_BYTES
 
 if TYPE_CHECKING:
     from ...agent.config import CarConfig
@@ -28,8 +26,6 @@ def _config_error(message: str) -> Exception:
     from ...agent.config import ConfigError
 
     return ConfigError(message)
-
-log = logging.getLogger(__name__)
 
 
 def parse_key(text: str, where: str) -> bytes:
@@ -48,27 +44,36 @@ def parse_key(text: str, where: str) -> bytes:
 def link_key(car: "CarConfig") -> bytes | None:
     """The key the car's link uses: None for version 1; for version 2 its key file's (or
     inline) key, or a ConfigError saying what to configure."""
-    where = f"cars[id={car.id}]"
-    if car.link_version == 1:
+    return key_for(car.id, car.link_version, car.link_key_file, car.link_key)
+
+
+def key_for(car_id: int, link_version: int, link_key_file: str, link_key: str) -> bytes | None:
+    """:func:`link_key` from a car's fields as a config file gives them (``trustfg stop``
+    reads them before the typed config loads: fleet.first_stop)."""
+    where = f"cars[id={car_id}]"
+    if link_version == 1:
         return None
-    if car.link_key_file:
-        path = Path(car.link_key_file).expanduser()
+    if link_key_file:
+        path = Path(link_key_file).expanduser()
         try:
             text = path.read_text()
             mode = path.stat().st_mode
         except OSError as exc:
             raise _config_error(f"{where}.link_key_file: cannot read {path}: {exc.strerror}") from None
         if mode & (stat.S_IRWXG | stat.S_IRWXO):
-            log.warning("%s.link_key_file %s is readable by others (chmod 600 it)", where, path)
+            import logging  # here: the e-stop's first datagrams go before logging loads
+
+            logging.getLogger(__name__).warning("%s.link_key_file %s is readable by others (chmod 600 it)",
+                                                where, path)
         return parse_key(text, f"{where}.link_key_file ({path})")
-    if car.link_key:
-        return parse_key(car.link_key, f"{where}.link_key")
+    if link_key:
+        return parse_key(link_key, f"{where}.link_key")
     raise _config_error(f"{where}: the car link (version 2, authenticated) needs the car's key: set "
                       f"link_key_file (or link_version = 1 for old firmware without authentication)")
 
 
 def new_key() -> bytes:
-    return secrets.token_bytes(KEY_BYTES)
+    return os.urandom(KEY_BYTES)  # what secrets.token_bytes returns, without importing random
 
 
 def write_key_file(path: Path, key: bytes) -> Path:

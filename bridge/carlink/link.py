@@ -32,18 +32,9 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Callable
 
 from .answer import Answer, decode_answer, encode_answer
-from .codec import (
-    SEQ_MODULUS,
-    SESSION_MODULUS,
-    SOURCE_CAR_PROCESS,
-    CarLinkError,
-    Command,
-    Flags,
-    _check_int,
-    check_key,
-    encode_command,
-    encode_command_v2,
-)
+from .codec import Command, _check_int, encode_command, encode_command_v2
+from .direct import resolve
+from .frame import SEQ_MODULUS, SOURCE_CAR_PROCESS, CarLinkError, Flags, check_key, new_session
 from .keys import link_key
 from .receiver import (
     DEFAULT_RESYNC_AFTER_S,
@@ -63,18 +54,6 @@ _RECV_BUFFER_BYTES = 2048
 
 Clock = Callable[[], float]
 
-_session_lock = threading.Lock()
-_last_session = 0
-
-
-def new_session() -> int:
-    """A version-2 session id: the wall clock in microseconds, strictly increasing within
-    this process (two senders started in the same microsecond still differ)."""
-    global _last_session
-    with _session_lock:
-        _last_session = max(time.time_ns() // 1000, _last_session + 1) % SESSION_MODULUS
-        return _last_session
-
 
 @dataclass(frozen=True)
 class SenderStats:
@@ -86,19 +65,6 @@ class SenderStats:
     send_errors: int = 0
     answers: int = 0
     bad_answers: int = 0
-
-
-def _resolve(address: tuple[str, int], passive: bool) -> tuple[socket.AddressFamily, tuple]:
-    """Resolve once (not per datagram), preferring IPv4 so that "localhost" means the same
-    address to a sender and a receiver."""
-    flags = socket.AI_PASSIVE if passive else 0
-    host = address[0] or None
-    try:
-        infos = socket.getaddrinfo(host, address[1], socket.AF_INET, socket.SOCK_DGRAM, flags=flags)
-    except socket.gaierror:
-        infos = socket.getaddrinfo(host, address[1], socket.AF_UNSPEC, socket.SOCK_DGRAM, flags=flags)
-    family, _, _, _, sockaddr = infos[0]
-    return family, sockaddr
 
 
 class CommandSender:
@@ -129,7 +95,7 @@ class CommandSender:
         self._seq = first_seq
         self._stop_repeats = stop_repeats
         self._stop_spacing_s = stop_spacing_s
-        family, self._sockaddr = _resolve(address, passive=False)
+        family, self._sockaddr = resolve(address, passive=False)
         self._sock: socket.socket | None = socket.socket(family, socket.SOCK_DGRAM)
         self._sock.settimeout(send_timeout_s)
         self._lock = threading.Lock()  # seq, socket, last flags and counts
@@ -272,7 +238,7 @@ class CommandReceiver:
         self.car_id = car_id
         self._clock = clock
         self._join_timeout_s = join_timeout_s
-        family, sockaddr = _resolve(bind_address, passive=True)
+        family, sockaddr = resolve(bind_address, passive=True)
         self._sock: socket.socket | None = socket.socket(family, socket.SOCK_DGRAM)
         try:
             self._sock.bind(sockaddr)

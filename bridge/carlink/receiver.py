@@ -68,7 +68,8 @@ from dataclasses import dataclass, field
 from typing import Mapping
 
 from .answer import Answer, CarState
-from .codec import CarLinkError, Command, _check_int, check_key, decode_command, decode_command_v2, seq_after
+from .codec import Command, _check_int, decode_command, decode_command_v2, seq_after
+from .frame import CarLinkError, check_key
 
 log = logging.getLogger(__name__)
 

@@ -1,15 +1,19 @@
 """The e-stop's direct path: the first E_STOPs read the links (and keys) straight from the config file."""
 
 import dataclasses
+import json
 import socket
+import subprocess
+import sys
 
 from trustfg.agent.scenario_files import dump_scenario
 from trustfg.bridge.carlink import SOURCE_OPERATOR, decode_command, decode_command_v2, link_key
 from trustfg.fleet.link_keys import with_link_keys
+from trustfg.fleet.testbed import links_to_sinks
 
 
 def test_the_first_e_stop_reads_links_from_the_file_and_reaches_only_the_named_cars(intersection, tmp_path):
-    from trustfg.fleet.link_stop import first_e_stop
+    from trustfg.fleet.first_stop import first_e_stop
 
     sinks = [socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in intersection.cars]
     try:
@@ -41,3 +45,34 @@ def test_the_first_e_stop_reads_links_from_the_file_and_reaches_only_the_named_c
     finally:
         for sink in sinks:
             sink.close()
+
+
+_SPY = """
+import json, socket, sys
+sent = []  # per datagram: were the typed config and logging loaded when it left?
+plain = socket.socket.sendto
+def sendto(self, data, *rest):
+    sent.append([m in sys.modules for m in ("trustfg.agent.config", "logging")])
+    return plain(self, data, *rest)
+socket.socket.sendto = sendto
+from trustfg.cli import main
+status = main(sys.argv[1:])
+print(json.dumps({"status": status, "sent": sent}))
+"""
+
+
+def test_trustfg_stop_sends_its_first_e_stops_before_the_typed_config_and_logging_load(intersection, tmp_path):
+    """The cli's fast path (fleet.first_stop): remove it, or set up logging first, and the
+    first datagram leaves after those imports."""
+    config, sinks = links_to_sinks(intersection, tmp_path)
+    try:
+        done = subprocess.run([sys.executable, "-c", _SPY, "stop", "--config", str(config), "--path", "link",
+                               "--repeat", "0.1", "--wait", "0.2"], capture_output=True, text=True, timeout=60)
+        report = json.loads(done.stdout.strip().splitlines()[-1])
+    finally:
+        for sink in sinks:
+            sink.close()
+    sent = report["sent"]
+    n = len(intersection.cars)
+    assert sent[:n] == [[False, False]] * n  # one E_STOP to each car before anything heavy loaded
+    assert len(sent) > n and sent[-1] == [True, True]  # then the typed path, the authority, repeated them
