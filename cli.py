@@ -10,7 +10,16 @@ nothing before it.
 from __future__ import annotations
 
 import importlib
+import os
 import sys
+
+BLAS_THREADS = "1"
+"""OpenBLAS threads per process (numpy and scipy each carry their own OpenBLAS, each
+starting one thread per core). A fleet's processes do small-matrix work, many of them
+per computer (a whole fleet on a laptop, a car computer of 2-4 cores): one BLAS thread
+each, so none spins up worker threads that compete with the others' control loops.
+Set here, before any subcommand imports numpy; an OPENBLAS_NUM_THREADS set by the user
+is kept."""
 
 COMMANDS = {
     "sim": ("trustfg.fleet.launch", "the main job: a whole fleet as OS processes with mocap-sim"),
@@ -49,6 +58,7 @@ def main(argv: list[str] | None = None) -> int:
     if name not in COMMANDS:
         print(f"trustfg: unknown command {name!r} (try 'trustfg --help')", file=sys.stderr)
         return 2
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", BLAS_THREADS)
     module = importlib.import_module(COMMANDS[name][0])
     try:
         if name == "stop":  # the e-stop: logging once its first datagrams are out

@@ -425,6 +425,6 @@ def _acceleration_mismatch(view: PeerView, fresh_s: float, until: float) -> floa
 
 
 def _mismatch(plan, t_old: float, observed_old: np.ndarray, t: float, observed: np.ndarray) -> float:
-    (v_then,), (v_now,) = plan.state_at(t_old)[1], plan.state_at(t)[1]
+    v_then, v_now = plan.state_at(np.array([t_old, t]))[1]  # one interpolation for both ends
     change = (observed - observed_old) - (v_now - v_then)
     return float(np.linalg.norm(change)) / (t - t_old)

@@ -115,7 +115,9 @@ class TrustBook:
     """The latest testimony of each reporter and when it arrived."""
     counters: Counter = field(default_factory=Counter)
     _fused: dict = field(default_factory=dict, repr=False)
-    """fused() per (peer, now), until the next evidence or testimony."""
+    """fused() per (peer, now) and discount() per (reporter, now), until the next
+    evidence or testimony: a tick's replan and report read every peer's fusion, and
+    every fusion every reporter's discount."""
 
     # --- direct evidence -----------------------------------------------------------------
 
@@ -178,29 +180,30 @@ class TrustBook:
         self._decay(own, now)
         own_tau = own.tau()
         own_amount = (own.alpha - c.prior_alpha) + (own.beta - c.prior_beta)
-        weights, evidence = [], []
+        weights, said, ages = [], [], []
         for reporter, (report, arrived) in self.testimonies.items():
             if reporter in (peer, self.owner) or peer not in report.peers:
                 continue
             weight = self.discount(reporter, now)
             if weight <= 0.0:
                 continue
-            said = report.peers[peer]
-            r, s = np.array(said.alpha), np.array(said.beta)
-            scale = np.minimum(1.0, c.testimony_max_evidence / np.maximum(r + s, 1e-12))
-            age = c.forgetting ** max(0.0, now - arrived)
-            r, s = r * scale * age, s * scale * age
-            said_tau = expected(r + c.prior_alpha, s + c.prior_beta)
-            deviates = (own_amount >= c.testimony_min_evidence) & (np.abs(said_tau - own_tau) > c.testimony_deviation)
-            self.counters["testimonies_rejected"] += int(np.sum(deviates))
-            use = ~deviates
-            weights.append(use.astype(float))
-            evidence.append((np.where(use, weight * r, 0.0), np.where(use, weight * s, 0.0)))
-        if not evidence:
+            weights.append(weight)
+            said.append((report.peers[peer].alpha, report.peers[peer].beta))
+            ages.append(c.forgetting ** max(0.0, now - arrived))
+        if not said:
             return own.alpha, own.beta
-        count = np.maximum(np.sum(weights, axis=0), 1.0)
-        r_said = np.sum([e[0] for e in evidence], axis=0) / count  # averaged: dependent sources
-        s_said = np.sum([e[1] for e in evidence], axis=0) / count
+        # One row per accepted reporter, one column per dimension.
+        weight, age = np.array(weights)[:, None], np.array(ages)[:, None]
+        r, s = np.array([a for a, _ in said]), np.array([b for _, b in said])
+        scale = np.minimum(1.0, c.testimony_max_evidence / np.maximum(r + s, 1e-12))
+        r, s = r * scale * age, s * scale * age
+        said_tau = expected(r + c.prior_alpha, s + c.prior_beta)
+        deviates = (own_amount >= c.testimony_min_evidence) & (np.abs(said_tau - own_tau) > c.testimony_deviation)
+        self.counters["testimonies_rejected"] += int(np.sum(deviates))
+        use = ~deviates
+        count = np.maximum(np.sum(use.astype(float), axis=0), 1.0)
+        r_said = np.sum(np.where(use, weight * r, 0.0), axis=0) / count  # averaged: dependent sources
+        s_said = np.sum(np.where(use, weight * s, 0.0), axis=0) / count
         said_amount = r_said + s_said
         surplus = np.where(said_amount > own_amount, (said_amount - own_amount) / np.maximum(said_amount, 1e-12), 0.0)
         alpha, beta = own.alpha + surplus * r_said, own.beta + surplus * s_said
@@ -208,12 +211,16 @@ class TrustBook:
         return np.where(careful, alpha, own.alpha), np.where(careful, beta, own.beta)
 
     def discount(self, reporter: int, now: float) -> float:
-        """Weight of a reporter's testimony: a's belief mass in r's weakest dimension."""
-        opinion = self.opinion(reporter, now)
-        self._decay(opinion, now)
-        tau = opinion.tau()
-        d = int(np.argmin(tau))
-        return float(belief(opinion.alpha[d], opinion.beta[d]))
+        """Weight of a reporter's testimony: a's belief mass in r's weakest dimension
+        (kept per (reporter, now) with the fusions: every fusion of a tick asks it)."""
+        key = ("discount", reporter, now)
+        if key not in self._fused:
+            opinion = self.opinion(reporter, now)
+            self._decay(opinion, now)
+            tau = opinion.tau()
+            d = int(np.argmin(tau))
+            self._fused[key] = float(belief(opinion.alpha[d], opinion.beta[d]))
+        return self._fused[key]
 
     # --- what the planner and the reports use ----------------------------------------------
 

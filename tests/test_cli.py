@@ -1,4 +1,5 @@
 import json
+import os
 import subprocess
 import sys
 
@@ -48,3 +49,16 @@ def test_studies_write_their_tables(tmp_path):
     bad = subprocess.run([sys.executable, "-m", "trustfg", "experiment", "adversaries", "--scenes", "nowhere"],
                          capture_output=True, text=True)
     assert bad.returncode == 2 and "nowhere" in bad.stderr and "Traceback" not in bad.stderr
+
+
+def test_a_trustfg_process_runs_one_blas_thread():
+    """numpy's and scipy's OpenBLAS would each start a thread per core in every car process."""
+    code = ("import os, sys\n"
+            "from trustfg.cli import main\n"
+            "try:\n    main(['car', '--help'])\nexcept SystemExit:\n    pass\n"
+            "import scipy.linalg  # scipy's own OpenBLAS too\n"
+            "print(len(os.listdir('/proc/self/task')), file=sys.stderr)\n")
+    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, env=env)
+    assert done.returncode == 0, done.stderr
+    assert done.stderr.strip().splitlines()[-1] == "1"
