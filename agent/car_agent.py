@@ -396,11 +396,12 @@ def _acceleration_mismatch(view: PeerView, fresh_s: float, until: float) -> floa
     arrived late still tells what the peer meant then); None if that plan is older than
     ``fresh_s`` then or there are not enough observations yet. The caller judges a
     window only once every plan that could still be believed for it has had time to
-    arrive (``until`` = now - stale_after_s): a plan delayed in the network is judged by
-    as if it had come at once, never read as a car that did not say what it did. A change of mind announced in time is not inconsistency: if a
-    plan made since (at least ANNOUNCED_MIN_S ago) announced what the peer did from its
-    stamp on, the smaller mismatch counts -- a car that had to brake for a surprise and
-    said so at its next replan is consistent; one that says it brakes and does not is not."""
+    arrive (``until`` = now - stale_after_s): a plan delayed in the network counts as if
+    it had come at once, never as a car that did not say what it did. A change of mind
+    announced in time is not inconsistency: if a plan made since (at least
+    ANNOUNCED_MIN_S ago) announced what the peer did from its stamp on, the smaller
+    mismatch counts -- a car that had to brake for a surprise and said so at its next
+    replan is consistent; one that says it brakes and does not is not."""
     end = next(((t, v) for t, v in reversed(view.velocities) if t <= until + 1e-9), None)
     if end is None:
         return None
