@@ -91,6 +91,37 @@ def bound_ports() -> set[tuple[str, int]]:
 BOUND_AT_START = bound_ports()
 
 
+def port_owners(ports: set[tuple[str, int]]) -> dict[tuple[str, int], list[str]]:
+    """Which processes hold each of ``ports`` ("pid: command line"), to name a leftover."""
+    inodes: dict[str, tuple[str, int]] = {}
+    for proto, port in ports:
+        path = Path("/proc/net") / proto
+        for line in path.read_text().splitlines()[1:] if path.exists() else []:
+            fields = line.split()
+            if int(fields[1].rsplit(":", 1)[1], 16) == port:
+                inodes[fields[9]] = (proto, port)
+    owners: dict[tuple[str, int], list[str]] = {port: [] for port in ports}
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            links = {_readlink(fd) for fd in (entry / "fd").iterdir()}
+            cmdline = (entry / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace").strip()
+        except OSError:  # gone, or not ours to read
+            continue
+        for inode, port in inodes.items():
+            if f"socket:[{inode}]" in links:
+                owners[port].append(f"{entry.name}: {cmdline[:200]}")
+    return owners
+
+
+def _readlink(path: Path) -> str:
+    try:
+        return os.readlink(path)
+    except OSError:  # an fd closed while we looked
+        return ""
+
+
 # --- UDP ports and multicast groups of their own, for NatNet tests -------------------------
 
 _groups = itertools.count(1)

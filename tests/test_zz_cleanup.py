@@ -1,11 +1,11 @@
 """After the whole suite: no trustfg process and no port the tests opened is left."""
 
-from tests.conftest import BOUND_AT_START, bound_ports, trustfg_processes, wait_for
+from tests.conftest import BOUND_AT_START, bound_ports, port_owners, trustfg_processes, wait_for
 
 
 def test_nothing_is_left_behind():
     assert wait_for(lambda: not trustfg_processes(), 10.0), trustfg_processes()
-    assert wait_for(lambda: not (bound_ports() - BOUND_AT_START), 10.0), sorted(bound_ports() - BOUND_AT_START)
+    assert wait_for(lambda: not (bound_ports() - BOUND_AT_START), 10.0), port_owners(bound_ports() - BOUND_AT_START)
     assert not fault_namespaces(), fault_namespaces()
 
 
