@@ -12,9 +12,13 @@ another car seen ahead of it. For every other car j whose centre lies within
 with a = ``decel_mps2``, t_r = ``reaction_s`` and d_stop the pair's breach distance
 (SafetyConfig: both radii + the required clearance) + ``stop_margin_m``. When we are
 also ahead of j (head-on), both cars close the same gap, so each may use only half of
-it: d - d_stop becomes (d - d_stop) / 2. Cars beside or behind do not limit us (they see
-us ahead and brake themselves), and turning is never limited, so a car held by the guard
-can still turn away.
+it: d - d_stop becomes (d - d_stop) / 2. A car beside us (outside the cone, but not
+behind: a = its distance along our heading > 0) is closed in on at v a / d, and that
+part of our speed must stop in time: v_max = v_stop(d - d_stop) d / a. That car may be
+one that cannot brake for us (stopped, its link cut): without this rule a car curving
+round it closes the gap while it stays beside (tests/bridge/test_guard.py, the spiral:
+down to 0.16 m centre to centre, a breach below 0.3 m, against 0.32 m with it). Cars behind never limit us, and turning is
+never limited, so a car held by the guard can still turn away.
 
 Walls the same way: d - d_stop is replaced by how far the centre can go straight ahead
 (ray-marched on the signed distance field, 2 cm steps) before its edge comes closer than
@@ -45,12 +49,17 @@ def speed_cap(x: float, y: float, yaw: float, radius_m: float,
     map's ``sdf``, of every wall ahead (inf when nothing is ahead)."""
     cap = math.inf if sdf is None else stopping_speed(wall_room(x, y, yaw, sdf, radius_m + config.wall_clearance_m), config)
     cos_cone = math.cos(math.radians(config.cone_deg))
+    c, s = math.cos(yaw), math.sin(yaw)
     for ox, oy, oyaw, oradius in others:
         dx, dy = ox - x, oy - y
         d = math.hypot(dx, dy)
-        if d > 0.0 and (dx * math.cos(yaw) + dy * math.sin(yaw)) / d < cos_cone:
-            continue  # beside or behind
-        room = d - (safety.breach_distance(radius_m, oradius) + config.stop_margin_m)
+        reach = safety.breach_distance(radius_m, oradius) + config.stop_margin_m
+        along = dx * c + dy * s
+        if d > 0.0 and along / d < cos_cone:  # beside or behind
+            if along > 0.0:  # beside: we close in at v along / d, and that part must stop in time
+                cap = min(cap, stopping_speed(d - reach, config) * d / along)
+            continue
+        room = d - reach
         if d > 0.0 and -(dx * math.cos(oyaw) + dy * math.sin(oyaw)) / d >= cos_cone:
             room /= 2.0  # it faces us too: we share the gap
         cap = min(cap, stopping_speed(room, config))
