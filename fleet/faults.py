@@ -221,7 +221,35 @@ def measure(case: Case, summary: dict, out: Path) -> dict:
     if case.measures_recovery and heal is not None and t_go is not None:
         row["time_to_recover_s"] = _time_to_recover(out / "messages.jsonl", ids, t_go + heal)
     row["plan_age_ms_p50"], row["plan_age_ms_p99"] = plan_age_percentiles(out / "messages.jsonl", t_go)
+    row["breach_pairs"] = summary["breaches"]
+    row["not_arrived"] = not_arrived(out, summary)
     return row
+
+
+def not_arrived(out: Path, summary: dict) -> dict[int, dict]:
+    """For each car short of its goal at the end, why, as far as the run says: where it
+    stands (ground truth), and its last status (state, plan outcomes, guard, deadlocks)."""
+    ids = [car for car, arrived in zip(summary["car_ids"], summary["reached_goal"]) if not arrived]
+    if not ids:
+        return {}
+    where: dict[int, tuple[float, float]] = {}
+    with open(out / "ground_truth.csv", newline="") as f:
+        for r in csv.DictReader(f):
+            if int(r["car_id"]) in ids:
+                where[int(r["car_id"])] = (round(float(r["x"]), 3), round(float(r["y"]), 3))
+    status: dict[int, dict] = {}
+    with open(out / "messages.jsonl") as f:
+        for line in f:
+            if '"status"' in line:
+                record = json.loads(line)
+                message = record.get("message", {})
+                if record.get("kind") == "status" and message.get("id") in ids:
+                    status[message["id"]] = message
+    keep = ("plans_first", "plans_retry", "plans_fallback", "guard_limited", "deadlocks", "deadlock_yields",
+            "stale_pose_stops")
+    return {car: {"at": where.get(car), "state": status.get(car, {}).get("state"),
+                  **{k: v for k, v in status.get(car, {}).get("counters", {}).items() if k in keep}}
+            for car in ids}
 
 
 def plan_age_percentiles(messages_path: Path, since: float | None) -> tuple[float | None, float | None]:
