@@ -28,7 +28,10 @@ How peers' plans are used (agent.evidence; docs/architecture.md, "Trust"):
   consistency evidence; a change of mind announced at once excuses what follows it. A
   window is judged ``stale_after_s`` after it ends -- when every plan that could still
   be believed for it has arrived -- so a plan held up in the network is not read as a
-  car that failed to say what it did (loss and delay cost honest cars no trust).
+  car that failed to say what it did (loss and delay cost honest cars no trust). A
+  window in which the proximity guard (agent.guard), fed the poses we see, would have
+  held the peer below its plan's speed is no evidence either way: every honest car's
+  guard slows it unannounced when another car or a wall comes close ahead.
 
 A liar (``car.attack``, agent.attacks) plans and drives like everyone else and lies in
 what it publishes.
@@ -57,6 +60,7 @@ from .config import CarConfig, Scenario
 from .deadlock import DeadlockWatch, peers_seen
 from .evidence import PeerView, audit, belief, safety_verdict, take_plan
 from .gp import Plan, standing
+from .guard import speed_cap
 from .messages import PlanMessage, TrustReport
 from .planner import PeerConstraint, PlanningError, PlanRequest, PlanResult
 from .safe_plan import FALLBACK, Outcome, plan_safely
@@ -78,6 +82,9 @@ before the window began. An older announcement has been superseded by plans we n
 received (loss, delay); holding a car to it would read silence as erratic driving."""
 ANNOUNCED_MIN_S = 0.2
 """A change of plan excuses what a car did only over at least this long after it."""
+GUARD_SLACK_MPS = 0.05
+"""A peer counts as held by its guard when the cap we compute for it is this much below
+its plan's speed (our view of the poses is not exactly its own)."""
 WARM_GOAL_M = 0.25
 """A plan that ends further than this from the goal does not warm-start a replan."""
 START_FROM_PLAN_M = 0.05
@@ -193,11 +200,25 @@ class CarAgent:
             view = self.peers.get(peer)
             if view is not None:
                 view.velocities.append((motion.stamp, motion.velocity))
+                if self._guard_holds(peer, motion, motions, view):
+                    view.held.append(motion.stamp)
                 mismatch = _acceleration_mismatch(view, self.scenario.control.replan_period_s + REPLAN_MARGIN_S,
                                                   now - config.stale_after_s)
                 if mismatch is not None:
                     s, f = graded(mismatch, config.consistency_tolerance_mps2)
                     self.trust.record(peer, CONSISTENCY, s, f, now)
+
+    def _guard_holds(self, peer: int, motion, motions: dict, view: PeerView) -> bool:
+        """Would the proximity guard (agent.guard), fed the poses we see, hold ``peer``
+        below the speed of the plan it announced? Then it is slower than it said for
+        safety's sake -- every honest car's guard does that, unannounced."""
+        if not self.scenario.guard.enabled or view.accepted is None:
+            return False
+        announced = float(np.linalg.norm(view.accepted.state_at(np.array([motion.stamp]))[1][0]))
+        others = [(*m.position, m.yaw, self.radius(cid)) for cid, m in motions.items() if cid != peer]
+        cap = speed_cap(*motion.position, motion.yaw, self.radius(peer), others, self.scenario.guard,
+                        self.scenario.safety, self.sdf)
+        return cap < announced - GUARD_SLACK_MPS
 
     # --- planning ---------------------------------------------------------------------------
 
@@ -411,6 +432,8 @@ def _acceleration_mismatch(view: PeerView, fresh_s: float, until: float) -> floa
     if start is None:
         return None
     t_old, observed_old = start
+    if any(t_old <= held <= t for held in view.held):
+        return None  # its guard held it back: slower than announced, for safety's sake
     announced = max(((stamp, p) for stamp, p in view.history if stamp <= t_old), key=lambda sp: sp[0],
                     default=None)
     if announced is None or t_old - announced[0] > fresh_s:

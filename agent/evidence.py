@@ -66,6 +66,10 @@ class PeerView:
     goal: tuple[float, float] | None = None
     velocities: deque = field(default_factory=lambda: deque(maxlen=64))
     """(t, observed velocity) at evidence ticks."""
+    held: deque = field(default_factory=lambda: deque(maxlen=64))
+    """Evidence ticks (t) at which the proximity guard, as we see the fleet, held the peer
+    below the speed its plan announced (agent.guard): what it did then is no evidence of
+    consistency either way."""
     history: deque = field(default_factory=lambda: deque(maxlen=32))
     """(stamp, plan) of the plans accepted lately, in order of arrival (our clock)."""
     clock: ClockEstimate = field(init=False)

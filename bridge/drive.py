@@ -7,7 +7,7 @@ in-process fleet (fleet.fleet_sim, on simulated time) both command their cars th
 1. STOP when the car may not drive (no start yet, before its departure, arrived), has
    no plan, or does not see itself;
 2. else the tracking command for the plan (bridge.tracking);
-3. capped, when ``guard.enabled``, by the proximity guard (bridge.guard) against the
+3. capped, when ``guard.enabled``, by the proximity guard (agent.guard) against the
    other cars it sees and the map's walls ahead of it.
 """
 
@@ -18,8 +18,8 @@ from dataclasses import dataclass
 
 from ..agent.config import Scenario
 from ..agent.gp import Plan
+from ..agent.guard import speed_cap
 from ..agent.world import SignedDistanceField
-from .guard import speed_cap
 from .tracking import track
 
 

@@ -11,7 +11,7 @@ Threads, each owning what it touches:
   (older than ``control.pose_timeout_s``, or no Motive yet), no plan, or the operator's
   protocol (agent.operation: waiting, arrived, e-stopped, before the departure, deadman)
   does not let the car drive; E_STOP while e-stopped, RELEASE after a release. The
-  tracking speed is capped by the proximity guard (bridge.guard) against the other cars
+  tracking speed is capped by the proximity guard (agent.guard) against the other cars
   it sees and the walls of the map. Every ``control.link_ping_period_s`` it PINGs the car
   and reads the answers (the link is up; the car's e-stop latch);
 * the main thread runs the agent: it drains frames and messages, hands the operator's

@@ -29,7 +29,7 @@ class ControlStats:
     stops: int = 0
     stale_pose_stops: int = 0
     guard_limited: int = 0
-    """Ticks whose forward speed the proximity guard lowered (bridge.guard)."""
+    """Ticks whose forward speed the proximity guard lowered (agent.guard)."""
     late_ms: deque = field(default_factory=lambda: deque(maxlen=100_000))
     """Lateness of the latest ticks (bounded: a lab run may last hours)."""
     late_p99_by_minute: deque = field(default_factory=lambda: deque(maxlen=24 * 60))

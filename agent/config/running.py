@@ -49,7 +49,7 @@ class TrackingConfig:
 
 @dataclass(frozen=True)
 class GuardConfig:
-    """The car process's last line of defence (bridge.guard): whatever the plan says, a car
+    """The car process's last line of defence (agent.guard): whatever the plan says, a car
     never drives faster than it can stop before another car seen ahead of it, or a wall.
     Off in the in-process experiments, which measure the planner's own factors."""
 

@@ -44,9 +44,10 @@ def plan_of(state, s: float) -> Plan:
                 velocities=np.c_[vs, np.zeros(13)])
 
 
-def consistency_failures(intersection, intersection_sdf, seed, moves, intends, delivery) -> float:
+def consistency_failures(intersection, intersection_sdf, seed, moves, intends, delivery, standing=None) -> float:
     """Drive the peer as ``moves``; every 0.2 s it announces ``intends(s)``; ``delivery(s)``
-    says when that plan arrives (None: lost). Returns the consistency failure mass."""
+    says when that plan arrives (None: lost); ``standing``: (x, y) where a third car
+    stands, seen too. Returns the consistency failure mass."""
     no_forgetting = replace(intersection, trust=replace(intersection.trust, forgetting=1.0))
     agent = CarAgent(intersection.cars[0], no_forgetting, intersection_sdf)
     rng = np.random.default_rng(seed)
@@ -58,6 +59,8 @@ def consistency_failures(intersection, intersection_sdf, seed, moves, intends, d
             agent.receive(PlanMessage(PEER, int(s * 5), s, intends(s), (5.0, 0.5)), t)
         x, _ = moves(t)
         agent.observe(t, PEER, x + rng.normal(0, 0.003), 0.5 + rng.normal(0, 0.003), 0.0)
+        if standing is not None:
+            agent.observe(t, PEER + 1, standing[0] + rng.normal(0, 0.003), standing[1] + rng.normal(0, 0.003), np.pi)
         agent.gather_evidence(t)
     return float(agent.trust.direct[PEER].beta[1] - intersection.trust.prior_beta)
 
@@ -115,3 +118,18 @@ def test_a_change_of_mind_that_arrives_late_is_not_inconsistency(intersection, i
     intends = lambda s: plan_of(cruising if s < 3.0 else state, s)  # noqa: E731
     late = lambda s: s + 0.6 if 2.8 <= s < 4.0 else on_time(s)  # noqa: E731
     assert consistency_failures(intersection, intersection_sdf, seed, state, intends, late) <= 0.25
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_a_car_its_guard_slows_unannounced_is_not_inconsistent(intersection, intersection_sdf, seed):
+    """The peer announces cruising all along and brakes at t = 3 s without a word: for no
+    reason it is inconsistent (as the first test); with a car standing 0.45 m ahead of it
+    then -- where its proximity guard caps it below the plan's speed -- it is what every
+    honest car's guard does, and no evidence either way."""
+    state = braking_at(3.0)
+    announced_cruise = lambda s: plan_of(cruising, s)  # noqa: E731
+    ahead = (state(3.0)[0] + 0.45, 0.5)
+    for_nothing = consistency_failures(intersection, intersection_sdf, seed, state, announced_cruise, on_time)
+    for_the_guard = consistency_failures(intersection, intersection_sdf, seed, state, announced_cruise, on_time, ahead)
+    assert for_nothing >= 1.0
+    assert for_the_guard <= 0.25

@@ -33,8 +33,8 @@ from collections.abc import Iterable
 
 import numpy as np
 
-from ..agent.config import GuardConfig, SafetyConfig
-from ..agent.world import SignedDistanceField
+from .config import GuardConfig, SafetyConfig
+from .world import SignedDistanceField
 
 RAY_STEP_M = 0.02
 RAY_LENGTH_M = 1.5

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from trustfg.agent.config import GuardConfig, SafetyConfig, VehicleConfig
+from trustfg.agent.guard import speed_cap, wall_room
 from trustfg.agent.vehicle import VehicleState, step
-from trustfg.bridge.guard import speed_cap, wall_room
 
 GUARD = GuardConfig()
 SAFETY = SafetyConfig()
