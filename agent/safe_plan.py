@@ -18,9 +18,13 @@ plans have been tried, or (in the car process) ``budget_ms`` of wall time has pa
     slower      a later arrival (the horizon half as long again), cold: the car lets the
                 others through first; with the lingering paces of the cold start this
                 includes waiting in place.
+    off lane    cold, without lane keeping: from a car standing off its lane (after a
+                detour or a swerve) the lane pulls the plan sideways harder than the car
+                can accelerate, at any pace (a process-fleet run had a car stand 0.4 m
+                off its lane for 45 s, every replan a fallback).
     cold        the planner's cold start (the route at several paces, the cheapest first).
 
-A plan that breaks only the vehicle's limits tries ``slower`` first.
+A plan that breaks only the vehicle's limits tries ``slower``, then ``off lane``, first.
 
 When nothing verifies, the car commits to the fallback (agent.fallback): a braking
 trajectory along its last verified plan that stops short of everything it knows of (or
@@ -134,7 +138,7 @@ def _next_attempt(request: PlanRequest, tried: list[str], failed: PlanResult | N
     conflicts = verdict.conflicts if verdict else ()
     distance = [c for c in conflicts if c.kind != "limits"]
     limits_only = bool(conflicts) and not distance
-    order = ["slower", "cold"] if limits_only else ["tighten", "other side", "slower", "cold"]
+    order = ["slower", "off lane", "cold"] if limits_only else ["tighten", "other side", "slower", "cold"]
     for name in order:
         if name in tried:
             continue
@@ -142,6 +146,8 @@ def _next_attempt(request: PlanRequest, tried: list[str], failed: PlanResult | N
             return name, tightened(request, failed.plan, distance)
         if name == "other side" and failed is not None and distance:
             return name, dataclasses.replace(request, warm_start=other_side(failed.plan, distance[0], request, sdf))
+        if name == "off lane" and request.lane:
+            return name, dataclasses.replace(request, warm_start=None, lane=())
         if name == "cold":
             return name, dataclasses.replace(request, warm_start=None)
         if name == "slower":
