@@ -115,6 +115,31 @@ def port_owners(ports: set[tuple[str, int]]) -> dict[tuple[str, int], list[str]]
     return owners
 
 
+def own_listeners() -> set[tuple[str, int]]:
+    """(protocol, port) of the TCP listeners this process (pytest itself) holds."""
+    mine = {_readlink(fd) for fd in Path("/proc/self/fd").iterdir()}
+    ports = set()
+    for proto in ("tcp", "tcp6"):
+        path = Path("/proc/net") / proto
+        for line in path.read_text().splitlines()[1:] if path.exists() else []:
+            fields = line.split()
+            if fields[3] == "0A" and f"socket:[{fields[9]}]" in mine:
+                ports.add((proto, int(fields[1].rsplit(":", 1)[1], 16)))
+    return ports
+
+
+FIRST_HELD_AFTER: dict[tuple[str, int], str] = {}
+"""For each TCP listener the pytest process held after a test, the first such test: a
+leftover in the suite's own process then names the test that opened it."""
+
+
+@pytest.fixture(autouse=True)
+def _note_own_listeners(request):
+    yield
+    for port in own_listeners():
+        FIRST_HELD_AFTER.setdefault(port, request.node.nodeid)
+
+
 def _readlink(path: Path) -> str:
     try:
         return os.readlink(path)

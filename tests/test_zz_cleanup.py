@@ -1,11 +1,13 @@
 """After the whole suite: no trustfg process and no port the tests opened is left."""
 
-from tests.conftest import BOUND_AT_START, bound_ports, port_owners, trustfg_processes, wait_for
+from tests.conftest import BOUND_AT_START, FIRST_HELD_AFTER, bound_ports, port_owners, trustfg_processes, wait_for
 
 
 def test_nothing_is_left_behind():
     assert wait_for(lambda: not trustfg_processes(), 10.0), trustfg_processes()
-    assert wait_for(lambda: not (bound_ports() - BOUND_AT_START), 10.0), port_owners(bound_ports() - BOUND_AT_START)
+    left = lambda: bound_ports() - BOUND_AT_START  # noqa: E731
+    assert wait_for(lambda: not left(), 10.0), {port: (owners, "first held by pytest after " + FIRST_HELD_AFTER.get(port, "-"))
+                                                for port, owners in port_owners(left()).items()}
     assert not fault_namespaces(), fault_namespaces()
 
 
