@@ -197,7 +197,7 @@ def run_case(case: Case, seed: int, out: Path) -> dict:
         schedule = [(t, (lambda action: lambda context: action(setup, context))(action)) for t, action in case.schedule]
         timeout = 40.0 if case.link_cut else None
         summary = run(setup.fleet, out, seed=seed, timeout_s=timeout, stop=setup.stop, mocap_args=tuple(setup.mocap_args),
-                      wrap=lab.wrap, schedule=schedule, infra_ip=lab.infra_ip)
+                      wrap=lab.wrap, schedule=schedule, infra_ip=lab.infra_ip, on_end=lab.clear_all)
     return measure(case, summary, out)
 
 

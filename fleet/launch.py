@@ -155,17 +155,23 @@ class RunContext:
         print(f"  t+{time.time() - self.t_go:5.1f}s: {what}", flush=True)
 
 
+END_CLOSE_TIMEOUT_S = 15.0
+"""How long the observer's session may take to close at the end of a run."""
+
+
 def run(scenario: Scenario, out: Path, seed: int = 0, timeout_s: float | None = None,
         natnet_version: str = natnet.DEFAULT_STREAM_VERSION, mocap_args: tuple[str, ...] = (), stop: threading.Event | None = None,
         dashboard_port: int | None = None, wrap: Callable[[str, list[str]], list[str]] | None = None,
         schedule: list[tuple[float, Callable[[RunContext], None]]] = (), infra_ip: str = "127.0.0.1",
-        stay: bool = False) -> dict:
+        stay: bool = False, on_end: Callable[[], None] | None = None) -> dict:
     """Run the fleet to completion; returns the summary (also written to out/summary.json).
 
     ``dashboard_port``: also start ``trustfg dashboard`` there (0: any free port).
     ``wrap(name, argv)``: how to start each child (e.g. inside a network namespace).
     ``schedule``: (seconds after the go, action) -- faults injected during the run.
-    ``stay``: run until the timeout even when every car has arrived (further trials)."""
+    ``stay``: run until the timeout even when every car has arrived (further trials).
+    ``on_end()``: called when the run is over, before anything is stopped (the fault lab
+    lifts its faults, so the observer's session closes with its peers in reach)."""
     stop = stop or threading.Event()
     out.mkdir(parents=True, exist_ok=True)
     scenario = with_link_keys(scenario, out / "keys")
@@ -240,9 +246,14 @@ def run(scenario: Scenario, out: Path, seed: int = 0, timeout_s: float | None = 
                 processes.cpu.sample()
                 recorder.poll()
             finally:
+                if on_end is not None:
+                    on_end()
                 processes.stop([name for name in processes.children if name.startswith("car")])
                 recorder.poll()
                 recorder.close()
+                # Wait for the session to close (its listener with it) rather than leave it
+                # to a thread: this process goes on (tests, the fault matrix's next run).
+                bus.close(timeout_s=END_CLOSE_TIMEOUT_S)
         processes.stop()
         summary = summarise(final_legs(scenario), out, recorder, t_go, crashed_early)
         summary["cpu"] = processes.cpu.summary("go", "first_arrival")

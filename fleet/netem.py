@@ -153,6 +153,11 @@ class Lab:
     def clear(self, car: int) -> None:
         sh("ip", "netns", "exec", self.ns(car), "nft", "delete", "table", "inet", TABLE, check=False)
 
+    def clear_all(self) -> None:
+        """Lift every fault of every car (loss, partition, link cut)."""
+        for car in self.car_ids:
+            self.clear(car)
+
     def loss(self, car: int, percent: int) -> None:
         """Drop ``percent`` % of every packet that arrives in car's namespace."""
         self.clear(car)
