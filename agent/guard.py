@@ -16,9 +16,13 @@ it: d - d_stop becomes (d - d_stop) / 2. A car beside us (outside the cone, but 
 behind: a = its distance along our heading > 0) is closed in on at v a / d, and that
 part of our speed must stop in time: v_max = v_stop(d - d_stop) d / a. That car may be
 one that cannot brake for us (stopped, its link cut): without this rule a car curving
-round it closes the gap while it stays beside (tests/bridge/test_guard.py, the spiral:
-down to 0.16 m centre to centre, a breach below 0.3 m, against 0.32 m with it). Cars behind never limit us, and turning is
-never limited, so a car held by the guard can still turn away.
+round it closes the gap while it stays beside (tests/agent/test_guard.py, the spiral:
+down to 0.16 m centre to centre, a breach below 0.3 m, against 0.32 m with it). Cars
+behind never limit us, and turning is never limited, so a car held by the guard can
+still turn away.
+
+The truster runs the same rule on the poses it sees (agent.car_agent): a peer its guard
+holds below its plan's speed is not taken for one that does not do what it said.
 
 Walls the same way: d - d_stop is replaced by how far the centre can go straight ahead
 (ray-marched on the signed distance field, 2 cm steps) before its edge comes closer than
