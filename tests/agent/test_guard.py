@@ -1,5 +1,5 @@
-"""The proximity guard: its formula, two blind cars driving at each other under it, and a
-blind car driving at a wall."""
+"""The proximity guard: its formula, two blind cars driving at each other under it, a car
+spiralling in on a car that cannot react, and a blind car driving at a wall."""
 
 import math
 
