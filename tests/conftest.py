@@ -72,20 +72,23 @@ def trustfg_processes() -> list[str]:
     return found
 
 
+def _bound_sockets(protos=("tcp", "tcp6", "udp", "udp6")) -> dict[str, tuple[str, int]]:
+    """Socket inode -> (protocol, port) of every listening TCP and bound UDP socket on
+    this machine (from /proc/net)."""
+    sockets = {}
+    for proto in protos:
+        path = Path("/proc/net") / proto
+        for line in path.read_text().splitlines()[1:] if path.exists() else []:
+            fields = line.split()
+            if proto.startswith("tcp") and fields[3] != "0A":  # LISTEN only
+                continue
+            sockets[fields[9]] = (proto, int(fields[1].rsplit(":", 1)[1], 16))
+    return sockets
+
+
 def bound_ports() -> set[tuple[str, int]]:
     """(protocol, port) of every listening TCP and bound UDP socket on this machine."""
-    ports = set()
-    for proto in ("tcp", "tcp6", "udp", "udp6"):
-        path = Path("/proc/net") / proto
-        if not path.exists():
-            continue
-        for line in path.read_text().splitlines()[1:]:
-            fields = line.split()
-            local, state = fields[1], fields[3]
-            if proto.startswith("tcp") and state != "0A":  # LISTEN only
-                continue
-            ports.add((proto, int(local.rsplit(":", 1)[1], 16)))
-    return ports
+    return set(_bound_sockets().values())
 
 
 BOUND_AT_START = bound_ports()
@@ -93,13 +96,7 @@ BOUND_AT_START = bound_ports()
 
 def port_owners(ports: set[tuple[str, int]]) -> dict[tuple[str, int], list[str]]:
     """Which processes hold each of ``ports`` ("pid: command line"), to name a leftover."""
-    inodes: dict[str, tuple[str, int]] = {}
-    for proto, port in ports:
-        path = Path("/proc/net") / proto
-        for line in path.read_text().splitlines()[1:] if path.exists() else []:
-            fields = line.split()
-            if int(fields[1].rsplit(":", 1)[1], 16) == port:
-                inodes[fields[9]] = (proto, port)
+    inodes = {inode: port for inode, port in _bound_sockets().items() if port in ports}
     owners: dict[tuple[str, int], list[str]] = {port: [] for port in ports}
     for entry in Path("/proc").iterdir():
         if not entry.name.isdigit():
@@ -118,14 +115,7 @@ def port_owners(ports: set[tuple[str, int]]) -> dict[tuple[str, int], list[str]]
 def own_listeners() -> set[tuple[str, int]]:
     """(protocol, port) of the TCP listeners this process (pytest itself) holds."""
     mine = {_readlink(fd) for fd in Path("/proc/self/fd").iterdir()}
-    ports = set()
-    for proto in ("tcp", "tcp6"):
-        path = Path("/proc/net") / proto
-        for line in path.read_text().splitlines()[1:] if path.exists() else []:
-            fields = line.split()
-            if fields[3] == "0A" and f"socket:[{fields[9]}]" in mine:
-                ports.add((proto, int(fields[1].rsplit(":", 1)[1], 16)))
-    return ports
+    return {port for inode, port in _bound_sockets(("tcp", "tcp6")).items() if f"socket:[{inode}]" in mine}
 
 
 FIRST_HELD_AFTER: dict[tuple[str, int], str] = {}

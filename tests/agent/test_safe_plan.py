@@ -158,9 +158,8 @@ def test_a_car_standing_off_its_lane_gets_a_verified_plan(room, seed):
     assert outcome.outcome in (FIRST, RETRY) and outcome.verdict.ok, outcome.tried
 
 
-def test_off_its_lane_the_lane_alone_asks_more_than_the_car_can():
+def test_off_its_lane_the_lane_alone_asks_more_than_the_car_can(room):
     """What the ``off lane`` retry is for: with lane keeping, every pace fails the limits."""
-    room = build_sdf(WorldConfig(bounds_m=(-3.0, -3.0, 3.0, 3.0)))
     no_retry = dataclasses.replace(CONFIG, max_attempts=2)  # cold, slower
     fallbacks = [plan_safely(standing_off_its_lane(seed), bounds(0), PLANNER, no_retry, room, None).outcome
                  for seed in range(12)]
