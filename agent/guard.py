@@ -24,6 +24,16 @@ still turn away.
 The truster runs the same rule on the poses it sees (agent.car_agent): a peer its guard
 holds below its plan's speed is not taken for one that does not do what it said.
 
+The reaction time t_r is measured, not assumed, where it can be (the car process):
+the age of the pose the command is computed from plus how long the command may stay in
+force -- the longest gap between the control loop's recent ticks, at most
+``command_hold_max_s`` (the car's watchdog stops it by then) -- and never less than
+``reaction_s``. A process starved of CPU (eight car processes on two cores: ticks 80-130 ms
+late, stalls over a second) thus drives slower near others instead of trusting 0.1 s.
+And a car that turns is checked at the heading it will have when the next command takes
+effect (yaw + omega t_r) as well as at its heading now: turning brings a car beside us
+into the cone.
+
 Walls the same way: d - d_stop is replaced by how far the centre can go straight ahead
 (ray-marched on the signed distance field, 2 cm steps) before its edge comes closer than
 ``wall_clearance_m`` to a wall -- or closer than it already is, so a car already near a
@@ -43,15 +53,35 @@ from .world import SignedDistanceField
 RAY_STEP_M = 0.02
 RAY_LENGTH_M = 1.5
 """Beyond the stopping distance from any speed the car can reach (0.8 m/s: 0.4 m)."""
+TURN_STEP_RAD = math.radians(15.0)
+"""A turning car is checked at headings this far apart over its turn."""
+
+
+def reaction_time(pose_age_s: float, tick_gap_s: float, config: GuardConfig) -> float:
+    """t_r = max(reaction_s, pose age + min(tick gap, command_hold_max_s)): how long the car
+    may go on at the commanded speed after the pose the command was computed from."""
+    return max(config.reaction_s, max(pose_age_s, 0.0) + min(max(tick_gap_s, 0.0), config.command_hold_max_s))
 
 
 def speed_cap(x: float, y: float, yaw: float, radius_m: float,
               others: Iterable[tuple[float, float, float, float]], config: GuardConfig,
-              safety: SafetyConfig, sdf: SignedDistanceField | None = None) -> float:
+              safety: SafetyConfig, sdf: SignedDistanceField | None = None,
+              reaction_s: float | None = None, turn_rad: float = 0.0) -> float:
     """The highest forward speed from which the car of ``radius_m`` at (x, y, yaw) still
     stops short of every car (x, y, yaw, radius) in ``others`` ahead of it and, given the
-    map's ``sdf``, of every wall ahead (inf when nothing is ahead)."""
-    cap = math.inf if sdf is None else stopping_speed(wall_room(x, y, yaw, sdf, radius_m + config.wall_clearance_m), config)
+    map's ``sdf``, of every wall ahead (inf when nothing is ahead); ``reaction_s`` (default
+    ``config.reaction_s``) before braking starts, and at the heading yaw + ``turn_rad`` too
+    (where a turning car points when the next command takes effect)."""
+    t_r = config.reaction_s if reaction_s is None else reaction_s
+    others = list(others)
+    steps = math.ceil(abs(turn_rad) / TURN_STEP_RAD)  # the sweep, every TURN_STEP_RAD or finer
+    return min(_cap_at(x, y, yaw + turn_rad * k / max(steps, 1), radius_m, others, config, safety, sdf, t_r)
+               for k in range(steps + 1))
+
+
+def _cap_at(x: float, y: float, yaw: float, radius_m: float, others: list[tuple[float, float, float, float]],
+            config: GuardConfig, safety: SafetyConfig, sdf: SignedDistanceField | None, t_r: float) -> float:
+    cap = math.inf if sdf is None else stopping_speed(wall_room(x, y, yaw, sdf, radius_m + config.wall_clearance_m), config, t_r)
     cos_cone = math.cos(math.radians(config.cone_deg))
     c, s = math.cos(yaw), math.sin(yaw)
     for ox, oy, oyaw, oradius in others:
@@ -61,22 +91,23 @@ def speed_cap(x: float, y: float, yaw: float, radius_m: float,
         along = dx * c + dy * s
         if d > 0.0 and along / d < cos_cone:  # beside or behind
             if along > 0.0:  # beside: we close in at v along / d, and that part must stop in time
-                cap = min(cap, stopping_speed(d - reach, config) * d / along)
+                cap = min(cap, stopping_speed(d - reach, config, t_r) * d / along)
             continue
         room = d - reach
         if d > 0.0 and -(dx * math.cos(oyaw) + dy * math.sin(oyaw)) / d >= cos_cone:
             room /= 2.0  # it faces us too: we share the gap
-        cap = min(cap, stopping_speed(room, config))
+        cap = min(cap, stopping_speed(room, config, t_r))
     return cap
 
 
-def stopping_speed(room: float, config: GuardConfig) -> float:
+def stopping_speed(room: float, config: GuardConfig, reaction_s: float | None = None) -> float:
     """v_max = a (-t_r + sqrt(t_r^2 + 2 room / a)): reaction plus braking distance = room."""
     if room <= 0.0:
         return 0.0
     if math.isinf(room):
         return math.inf
-    a, t_r = config.decel_mps2, config.reaction_s
+    a = config.decel_mps2
+    t_r = config.reaction_s if reaction_s is None else reaction_s
     return a * (-t_r + math.sqrt(t_r * t_r + 2.0 * room / a))
 
 

@@ -38,15 +38,17 @@ STOP = Command(0.0, 0.0, stop=True)
 
 def drive(plan: Plan | None, t: float, pose: tuple[float, float, float] | None, may_drive: bool,
           others: Callable[[], Iterable[tuple[float, float, float, float]]], radius_m: float,
-          scenario: Scenario, sdf: SignedDistanceField | None) -> Command:
+          scenario: Scenario, sdf: SignedDistanceField | None, reaction_s: float | None = None) -> Command:
     """The command of a car at ``pose`` (x, y, yaw; None: not seen) following ``plan`` at
     time ``t``; ``others()`` gives the other cars it sees, (x, y, yaw, radius), and is
-    asked only when the guard needs it."""
+    asked only when the guard needs it; ``reaction_s``: the guard's reaction time as
+    measured (agent.guard.reaction_time; default the configured one)."""
     if pose is None or plan is None or not may_drive:
         return STOP
     v, omega = track(plan, t, pose[0], pose[1], pose[2], scenario.tracking, scenario.vehicle)
     if scenario.guard.enabled:
-        cap = speed_cap(*pose, radius_m, others(), scenario.guard, scenario.safety, sdf)
+        t_r = scenario.guard.reaction_s if reaction_s is None else reaction_s
+        cap = speed_cap(*pose, radius_m, others(), scenario.guard, scenario.safety, sdf, t_r, omega * t_r)
         if v > cap:
             return Command(cap, omega, guard_limited=True)
     return Command(v, omega)

@@ -54,6 +54,7 @@ from ..agent import messages
 from ..agent.car_agent import CarAgent
 from ..agent.config import CarConfig, ConfigError, Scenario
 from ..agent.gp import standing
+from ..agent.guard import reaction_time
 from ..agent.operation import Mode, Operation
 from ..agent.scenario_files import load_scenario
 from ..agent.world import build_sdf
@@ -71,6 +72,9 @@ log = logging.getLogger(__name__)
 
 SWITCH_INTERVAL_S = 0.001
 STUCK_AFTER_S = 0.8
+GAP_WINDOW_S = 5.0
+"""The guard's command hold is the longest gap between control ticks over this window: a
+process that stalled lately is taken to stall again (tests/agent/test_guard.py)."""
 STUCK_COMMAND_MPS = 0.1
 STUCK_MOTION_MPS = 0.03
 
@@ -194,15 +198,17 @@ class CarProcess:
 
     # --- the control thread -----------------------------------------------------------------
 
-    def _own_pose(self) -> tuple[float, float, float] | None:
+    def _own_pose(self) -> tuple[tuple[float, float, float], float] | None:
+        """The car's own fresh, tracked pose (x, y, yaw) and its age in seconds."""
         natnet_client = self._natnet
         sample = natnet_client.latest(self.car.body_id) if natnet_client is not None else None
         if sample is None or not sample.body.tracking_valid:
             return None
-        if time.monotonic() - sample.received_s > self.scenario.control.pose_timeout_s:
+        age = time.monotonic() - sample.received_s
+        if age > self.scenario.control.pose_timeout_s:
             return None
         return natnet.to_ground_plane(sample.body.position, sample.body.orientation,
-                                      self.scenario.natnet.up_axis)
+                                      self.scenario.natnet.up_axis), age
 
     def _others_seen(self) -> list[tuple[float, float, float, float]]:
         """Fresh, tracked poses (x, y, yaw) and radii of every other car of the fleet."""
@@ -222,10 +228,15 @@ class CarProcess:
     def _control_loop(self, sender: CommandSender) -> None:
         self.control.started = time.monotonic()
         next_ping = self.control.started
-        for deadline, now_mono in ticks(1.0 / self.scenario.control.command_rate_hz, self.stop):
-            self.control.add(max(0.0, now_mono - deadline) * 1e3, int(60 * self.scenario.control.command_rate_hz))
+        rate = self.scenario.control.command_rate_hz
+        gaps: deque[float] = deque(maxlen=int(GAP_WINDOW_S * rate))  # recent gaps between ticks
+        last = None
+        for deadline, now_mono in ticks(1.0 / rate, self.stop):
+            self.control.add(max(0.0, now_mono - deadline) * 1e3, int(60 * rate))
+            gaps.append(1.0 / rate if last is None else now_mono - last)
+            last = now_mono
             try:
-                self._command(sender)
+                self._command(sender, max(gaps))
                 if now_mono >= next_ping:
                     next_ping = max(next_ping + self.scenario.control.link_ping_period_s, now_mono)
                     sender.send(0.0, 0.0, Flags.STOP | Flags.PING)
@@ -246,8 +257,11 @@ class CarProcess:
         if changed:
             log.warning("car %d: %s", self.car.id, self.operation.reason)
 
-    def _command(self, sender: CommandSender) -> None:
-        pose = self._own_pose()
+    def _command(self, sender: CommandSender, tick_gap_s: float) -> None:
+        """One tick: the command for the car; ``tick_gap_s`` the longest recent gap between
+        ticks, which with the pose's age is the guard's reaction time (agent.guard)."""
+        seen = self._own_pose()
+        pose, age = seen if seen is not None else (None, 0.0)
         plan = self._plan
         now = self.clock()
         with self._operation_lock:
@@ -267,7 +281,7 @@ class CarProcess:
             sender.send(*turn, flags)
         else:  # the control step both simulations share (bridge.drive): STOP without a plan or leave
             command = drive(plan, now, pose, go and not link.e_stop, self._others_seen, self.car.radius_m,
-                            self.scenario, self.sdf)
+                            self.scenario, self.sdf, reaction_time(age, tick_gap_s, self.scenario.guard))
             if command.stop:
                 self.control.stops += 1
                 sender.send(0.0, 0.0, Flags.STOP | flags)
@@ -466,11 +480,11 @@ class CarProcess:
             bus.publish("plan", messages.encode(outgoing), repeat=repeat)
 
     def _publish_pose(self, bus: FleetBus, now: float) -> None:
-        pose = self._own_pose()
-        x, y, yaw = pose if pose is not None else (0.0, 0.0, 0.0)
+        seen = self._own_pose()
+        x, y, yaw = seen[0] if seen is not None else (0.0, 0.0, 0.0)
         self._seq["pose"] += 1
         bus.publish("pose", messages.encode(messages.PoseMessage(
-            self.car.id, self._seq["pose"], now, x, y, yaw, pose is not None)))
+            self.car.id, self._seq["pose"], now, x, y, yaw, seen is not None)))
 
     def _publish_status(self, bus: FleetBus) -> None:
         self._seq["status"] += 1

@@ -61,7 +61,12 @@ class GuardConfig:
     decel_mps2: float = 1.0
     """Braking the guard counts on (below the vehicle's max_accel_mps2, for margin)."""
     reaction_s: float = 0.1
-    """Pose age plus command latency the guard allows for before braking starts."""
+    """Pose age plus command latency the guard allows for before braking starts, at least
+    (the car process measures both and uses more when they are longer)."""
+    command_hold_max_s: float = 0.25
+    """The longest a command stays in force without a newer one: the car's watchdog (the
+    car link's receiver stops the car 250 ms after its last command). Bounds the measured
+    reaction time of a control loop that stalls."""
     cone_deg: float = 60.0
     """Another car counts as ahead within this angle of the heading, either side."""
     wall_clearance_m: float = 0.05
@@ -69,7 +74,7 @@ class GuardConfig:
 
     def validate(self, path: str) -> None:
         positive(self.decel_mps2, f"{path}.decel_mps2")
-        for name in ("stop_margin_m", "reaction_s", "wall_clearance_m"):
+        for name in ("stop_margin_m", "reaction_s", "command_hold_max_s", "wall_clearance_m"):
             if getattr(self, name) < 0:
                 raise ConfigError(f"{path}.{name}: must be >= 0")
         if not 0.0 < self.cone_deg <= 180.0:
