@@ -23,7 +23,9 @@ eps_obs from walls; r = 0.1 m gives 0.45 m and 0.25 m):
 Every car gets a route (via points, fleet.routes) where the straight line would not keep
 its comfort from obstacles. Every scene is checked (:func:`check_scene`): a start or goal
 closer than eps_obs to an obstacle or wall, or closer than eps_0 to another car's start
-(goal), is refused with one line and exit status 2. A scene's ``sim.timeout_s`` is set
+(goal), or in which a car is cut off from its goal once the others stand at theirs
+(:func:`cut_off_by_parked`: a deadlock no planner resolves), is refused with one line and
+exit status 2; the generator draws again from the seed's stream until a layout passes. A scene's ``sim.timeout_s`` is set
 from its longest route, so a stuck run ends soon.
 """
 
@@ -41,7 +43,7 @@ from ..agent.config import CarConfig, ConfigError, Obstacle, SafetyConfig, Scena
 from ..agent.scenario_files import dump_scenario, load_scenario
 from ..agent.world import SignedDistanceField, build_sdf
 from .command import command_parser, configured
-from .routes import COMFORT_MARGIN_M, NoRoute, car_route, path_length
+from .routes import COMFORT_MARGIN_M, NoRoute, car_route, connected, path_length
 
 RADIUS_M = CarConfig(id=1, start=(0, 0), goal=(0, 0)).radius_m
 """Generated cars have the default radius."""
@@ -164,15 +166,19 @@ def t_junction(n: int, rng: np.random.Generator, safety: SafetyConfig) -> Layout
 def warehouse(n: int, rng: np.random.Generator, safety: SafetyConfig) -> Layout:
     eps_0, eps_obs = _distances(safety)
     aisles = 4 if n <= 8 else 5
-    aisle, rack, rack_len, cross = 1.0, 0.4, 2.0, 1.0
+    # A spot is a bay along one side of an aisle (a parked car leaves room to pass it): an
+    # aisle holds a parked car eps_obs off the rack, eps_0 to the passing car and eps_obs to
+    # the other rack, plus slack; the cross aisles the same, bays against the outer walls.
+    aisle = cross = 2 * eps_obs + eps_0 + 0.25
+    rack, rack_len = 0.4, 2.0
     width = aisles * aisle + (aisles - 1) * rack
     half_w, half_h = width / 2, rack_len / 2 + cross
     centres = [-half_w + aisle / 2 + k * (aisle + rack) for k in range(aisles)]
     obstacles = tuple(Obstacle(kind="rect", min=_pt(c + aisle / 2, -rack_len / 2), max=_pt(c + aisle / 2 + rack, rack_len / 2))
                       for c in centres[:-1])
-    step = eps_0 + 0.1
-    spots = [_pt(c, y) for c in centres for y in (-step, 0.0, step)]
-    spots += [_pt(c, s * (rack_len / 2 + cross / 2)) for c in centres for s in (-1, 1)]
+    step, bay = eps_0 + 0.1, eps_obs + 0.02
+    spots = [_pt(c - aisle / 2 + bay, y) for c in centres for y in (-step, 0.0, step)]
+    spots += [_pt(c, s * (half_h - bay)) for c in centres for s in (-1, 1)]
     if n > len(spots) // 2:
         raise ConfigError(f"warehouse: at most {len(spots) // 2} cars")
     starts = [spots[i] for i in rng.permutation(len(spots))[:n]]
@@ -244,6 +250,10 @@ KINDS: dict[str, Callable[..., Layout]] = {
 # --- a whole scene -------------------------------------------------------------------------------
 
 
+DRAWS = 200
+"""Layouts a seed draws, one after another, until one passes :func:`check_scene`."""
+
+
 def generate(kind: str, cars: int, seed: int, name: str = "") -> tuple[Scenario, str]:
     """The scene of ``kind`` with ``cars`` cars drawn from ``seed``, and its one-line
     description; ConfigError if it cannot be made or fails :func:`check_scene`."""
@@ -251,13 +261,19 @@ def generate(kind: str, cars: int, seed: int, name: str = "") -> tuple[Scenario,
         raise ConfigError(f"--kind: expected one of {', '.join(KINDS)}, got {kind!r}")
     if not 2 <= cars <= 64:
         raise ConfigError(f"--cars: expected 2..64, got {cars}")
-    safety = SafetyConfig()
-    layout = KINDS[kind](cars, np.random.default_rng(seed), safety)
-    world = WorldConfig(bounds_m=tuple(round(b, 3) for b in layout.bounds), obstacles=layout.obstacles)
-    sdf = build_sdf(world)
-    draft = Scenario(name=name or f"{kind}-{cars}", world=world,
-                     cars=tuple(CarConfig(id=i + 1, start=s, goal=g) for i, (s, g) in enumerate(layout.trips)))
-    check_scene(draft, sdf)
+    safety, rng = SafetyConfig(), np.random.default_rng(seed)
+    for draw in range(DRAWS):  # the seed's first layout that passes the check
+        layout = KINDS[kind](cars, rng, safety)
+        world = WorldConfig(bounds_m=tuple(round(b, 3) for b in layout.bounds), obstacles=layout.obstacles)
+        sdf = build_sdf(world)
+        draft = Scenario(name=name or f"{kind}-{cars}", world=world,
+                         cars=tuple(CarConfig(id=i + 1, start=s, goal=g) for i, (s, g) in enumerate(layout.trips)))
+        try:
+            check_scene(draft, sdf)
+            break
+        except ConfigError:
+            if draw == DRAWS - 1:
+                raise
     routed = []
     for car in draft.cars:
         try:
@@ -276,8 +292,33 @@ def generate(kind: str, cars: int, seed: int, name: str = "") -> tuple[Scenario,
 
 def check_scene(scenario: Scenario, sdf: SignedDistanceField | None = None) -> None:
     """Raise ConfigError unless every start and goal keeps eps_obs from obstacles and walls
-    and eps_0 from every other car's start (goal)."""
+    and eps_0 from every other car's start (goal), and no car parked at its goal cuts
+    another off from its own (:func:`cut_off_by_parked`)."""
     sdf = sdf or build_sdf(scenario.world)
+    _check_clear(scenario, sdf)
+    for car in scenario.cars:
+        if cut_off_by_parked(scenario, car, sdf):
+            raise ConfigError(f"{scenario.name}: car {car.id} cannot reach its goal {car.goal} from its start "
+                              f"{car.start} once the other cars stand at their goals (no gap of eps_0 past them): "
+                              "move goals out of the ways")
+
+
+def cut_off_by_parked(scenario: Scenario, car: CarConfig, sdf: SignedDistanceField) -> bool:
+    """Whether ``car``'s way from start to goal, keeping eps_obs from obstacles, is cut once
+    every other car stands at its goal, each kept eps_0 off. A car at its goal stays there
+    (it is nobody's obstacle to wait for: it will not move), so a scene where one order of
+    arrivals cuts a car off ends in a deadlock no planner that keeps eps_0 can resolve
+    (the condition of "well-formed" infrastructures in prioritised planning, Cap et al.
+    2015, for goals only: a start is left in time). A goal on another car's start is not
+    counted for that car: it is reached only after that car has left."""
+    safety = scenario.safety
+    keep_out = [(other.goal, safety.epsilon_0(car.radius_m, other.radius_m)) for other in scenario.cars
+                if other.id != car.id
+                and math.dist(other.goal, car.start) >= safety.epsilon_0(car.radius_m, other.radius_m)]
+    return not connected(sdf, car.start, car.goal, safety.epsilon_obstacle(car.radius_m) - 1e-6, keep_out)
+
+
+def _check_clear(scenario: Scenario, sdf: SignedDistanceField) -> None:
     safety = scenario.safety
     for which in ("start", "goal"):
         points = np.array([getattr(car, which) for car in scenario.cars], dtype=float)

@@ -8,12 +8,12 @@ import sys
 import numpy as np
 import pytest
 
-from trustfg.agent.config import ConfigError
+from trustfg.agent.config import CarConfig, ConfigError, Scenario, WorldConfig
 from trustfg.agent.scenario_files import load_scenario, read_source
 from trustfg.agent.world import build_sdf
 from trustfg.fleet.bank import BANK
 from trustfg.fleet.routes import segment_clear
-from trustfg.fleet.scenes import KINDS, check_scene, generate, scene_file_text
+from trustfg.fleet.scenes import KINDS, check_scene, cut_off_by_parked, generate, scene_file_text
 
 SIZES = {"circle": 8, "circle-obstacles": 8, "corridor": 4, "bottleneck": 4, "t-junction": 6, "warehouse": 8,
          "random-field": 6}
@@ -84,3 +84,30 @@ def test_the_command_writes_a_scene_and_refuses_bad_ones_in_one_line(tmp_path):
 
     too_many = _trustfg("scenario", "generate", "--kind", "t-junction", "--cars", "20", "--out", str(out))
     assert too_many.returncode == 2 and too_many.stderr.count("\n") == 1 and "at most 12" in too_many.stderr
+
+
+def _corridor(parked_at: tuple[float, float]) -> Scenario:
+    """A corridor 1.2 m wide; car 2 parks at ``parked_at``, car 1 drives its length."""
+    return Scenario(name="corridor", world=WorldConfig(bounds_m=(-2.0, -0.6, 2.0, 0.6)),
+                    cars=(CarConfig(id=1, start=(-1.5, 0.0), goal=(1.5, 0.0)),
+                          CarConfig(id=2, start=(1.5, -0.3), goal=parked_at)))
+
+
+def test_a_car_parked_in_the_way_is_refused_and_one_in_a_bay_is_not():
+    """Parked mid-corridor, car 2 leaves no eps_0 gap: car 1 could never pass once car 2
+    arrives first. Parked against the wall, it leaves 0.23 m of room to pass."""
+    in_the_way, in_a_bay = _corridor((0.0, 0.0)), _corridor((0.0, -0.33))
+    sdf = build_sdf(in_the_way.world)
+    assert cut_off_by_parked(in_the_way, in_the_way.cars[0], sdf)
+    assert not cut_off_by_parked(in_a_bay, in_a_bay.cars[0], sdf)
+    with pytest.raises(ConfigError, match="car 1 cannot reach its goal"):
+        check_scene(in_the_way)
+    check_scene(in_a_bay)
+
+
+def test_a_goal_on_another_cars_start_does_not_cut_that_car_off():
+    """A swap: each car's goal is the other's start, reached only after the other left."""
+    swap = Scenario(name="swap", world=WorldConfig(bounds_m=(-2.0, -0.6, 2.0, 0.6)),
+                    cars=(CarConfig(id=1, start=(-1.5, 0.0), goal=(1.5, 0.0)),
+                          CarConfig(id=2, start=(1.5, 0.0), goal=(-1.5, 0.0))))
+    check_scene(swap)
