@@ -103,8 +103,9 @@ class CarAgent:
     rng: np.random.Generator = field(default_factory=lambda: np.random.default_rng(0))
     """Drives this car's attack only (seeded by the caller)."""
     clock: Callable[[], float] | None = None
-    """Wall clock of the replan budget (VerifyConfig.budget_ms) in the car process; None
-    in the in-process fleet, whose replans take no simulated time (attempts only)."""
+    """Clock of the replan budget (VerifyConfig.budget_ms) in the car process: the
+    planning thread's CPU time; None in the in-process fleet, whose replans take no
+    simulated time (attempts only)."""
 
     def __post_init__(self) -> None:
         self.tracks: dict[int, Track] = {}

@@ -3,7 +3,7 @@
 Every plan the optimiser returns is verified (agent.verify) before the car uses or
 publishes it. A plan that fails is not executed; the planner tries again from other
 starting guesses, cheapest first, until one verifies, ``VerifyConfig.max_attempts``
-plans have been tried, or (in the car process) ``budget_ms`` of wall time has passed:
+plans have been tried, or (in the car process) ``budget_ms`` of CPU time has gone:
 
     tighten     the failed plan as the warm start, with every epsilon it broke raised by
                 how far it broke it: a hinge that presses settles inside its epsilon
@@ -32,7 +32,7 @@ that plan itself while it is still clear), published as its plan so that its pee
 around a car that stops. Counting the outcomes (first try, retry, fallback) per car is
 the caller's job (agent.car_agent).
 
-Pure: the wall clock is passed in (None in the in-process fleet, which runs on simulated
+Pure: the budget's clock is passed in (None in the in-process fleet, which runs on simulated
 time and counts attempts only, so a run stays exactly repeatable from its seed).
 """
 

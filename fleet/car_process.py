@@ -124,7 +124,7 @@ class CarProcess:
     def _new_agent(self) -> CarAgent:
         """A fresh mind: a car starts every trial from what it sees, not from the last one."""
         return CarAgent(car=self.car, scenario=self.scenario, sdf=self.sdf, depart_at=math.inf,
-                        clock=time.perf_counter)
+                        clock=time.thread_time)  # the replan budget is CPU time (VerifyConfig.budget_ms)
 
     # --- inputs ---------------------------------------------------------------------------
 

@@ -233,8 +233,11 @@ class VerifyConfig:
     """Levenberg-Marquardt iterations an alternative may take (the first plan takes the
     planner's own ``max_iterations``): retries must fit in a replan's budget."""
     budget_ms: float = 80.0
-    """Wall time after which no further alternative is started in a replan (the car
-    process; the in-process fleet runs on simulated time and counts attempts only)."""
+    """CPU time of the planning thread after which no further alternative is started in a
+    replan (the car process; the in-process fleet runs on simulated time and counts
+    attempts only). CPU time, not wall time: a process that waits for a core (eight car
+    processes on two) still gets its alternatives instead of falling back for lack of
+    time, as the in-process fleet does."""
     fallback_decel_mps2: float = 1.0
     """Deceleration of the fallback's braking trajectory (below VehicleConfig's limit, so
     the car can follow it)."""
