@@ -11,7 +11,9 @@ clock. Then it prints one table, a row per configured car:
     clock    the offset of its computer's clock against this one (the middle of the
              query's round trip; +- half of it), a warning above ``operator.clock_tolerance_s``
 
-and below it what is missing. Exit status 0 when nothing is, else 1.
+and below it what is missing, and a warning when the scene fails ``trustfg scenario check``
+(e.g. a car parked at its goal cuts another off from its own). Exit status 0 when nothing
+is missing and nothing warned, else 1.
 """
 
 from __future__ import annotations
@@ -30,6 +32,7 @@ from ..bridge.natnet_client import NatNetClient, NatNetConnectionError, client_o
 from .bus import BusError, FleetBus
 from .command import command_parser, configured
 from .link_stop import LinkStopper
+from .scenes import scene_problem
 
 CLOCK_QUERIES = 5
 START_TOLERANCE_M = 0.1
@@ -182,6 +185,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"trustfg check: the bus: {exc}", file=sys.stderr)
         return 1
     out = report(fleet, seen, motive, others)
+    problem = scene_problem(fleet)
+    if problem is not None:
+        out.warnings.append(f"the scene: {problem}")
     widths = [max(len(row[i]) for row in out.rows) for i in range(len(out.rows[0]))]
     for row in out.rows:
         print("  ".join(cell.ljust(width) for cell, width in zip(row, widths)).rstrip())

@@ -58,6 +58,7 @@ from .link_keys import with_link_keys
 from .operator import OperatorSession
 from .processes import READY_TIMEOUT_S, Processes, wait_ready
 from .recording import convert_run
+from .scenes import scene_problem
 from .sim_summary import Recorder, print_summary, summarise
 
 log = logging.getLogger(__name__)
@@ -322,6 +323,9 @@ def main(argv: list[str] | None = None) -> int:
         clock_offsets=parse_id_values(args.clock_offset, "--clock-offset")), args.deadman))
     if args.laps is not None:
         fleet = dataclasses.replace(fleet, control=dataclasses.replace(fleet.control, laps=args.laps))
+    problem = scene_problem(fleet)
+    if problem is not None:
+        print(f"trustfg sim: warning: {problem}", file=sys.stderr)
     out = args.out or Path("runs") / time.strftime("sim-%Y%m%d-%H%M%S")
     stop = stop_on_signals(threading.Event())
     try:

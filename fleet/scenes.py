@@ -303,6 +303,16 @@ def check_scene(scenario: Scenario, sdf: SignedDistanceField | None = None) -> N
                               "move goals out of the ways")
 
 
+def scene_problem(scenario: Scenario) -> str | None:
+    """What :func:`check_scene` says against ``scenario`` (None: nothing), for the tools
+    that run a scene anyway and warn (``trustfg sim``, ``trustfg check``)."""
+    try:
+        check_scene(scenario)
+    except ConfigError as exc:
+        return str(exc)
+    return None
+
+
 def cut_off_by_parked(scenario: Scenario, car: CarConfig, sdf: SignedDistanceField) -> bool:
     """Whether ``car``'s way from start to goal, keeping eps_obs from obstacles, is cut once
     every other car stands at its goal, each kept eps_0 off. A car at its goal stays there

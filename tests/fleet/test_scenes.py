@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 
 from trustfg.agent.config import CarConfig, ConfigError, Scenario, WorldConfig
-from trustfg.agent.scenario_files import load_scenario, read_source
+from trustfg.agent.scenario_files import dump_scenario, load_scenario, read_source
 from trustfg.agent.world import build_sdf
 from trustfg.fleet.bank import BANK
 from trustfg.fleet.routes import segment_clear
-from trustfg.fleet.scenes import KINDS, check_scene, cut_off_by_parked, generate, scene_file_text
+from trustfg.fleet.scenes import KINDS, check_scene, cut_off_by_parked, generate, scene_file_text, scene_problem
 
 SIZES = {"circle": 8, "circle-obstacles": 8, "corridor": 4, "bottleneck": 4, "t-junction": 6, "warehouse": 8,
          "random-field": 6}
@@ -103,6 +103,16 @@ def test_a_car_parked_in_the_way_is_refused_and_one_in_a_bay_is_not():
     with pytest.raises(ConfigError, match="car 1 cannot reach its goal"):
         check_scene(in_the_way)
     check_scene(in_a_bay)
+    assert "car 1 cannot reach its goal" in scene_problem(in_the_way)  # what sim and check warn
+    assert scene_problem(in_a_bay) is None
+
+
+def test_the_command_refuses_a_scene_with_a_car_parked_in_the_way(tmp_path):
+    out = tmp_path / "corridor.toml"
+    out.write_text(dump_scenario(_corridor((0.0, 0.0))))
+    bad = _trustfg("scenario", "check", str(out))
+    assert bad.returncode == 2
+    assert bad.stderr.count("\n") == 1 and "car 1 cannot reach its goal" in bad.stderr
 
 
 def test_a_goal_on_another_cars_start_does_not_cut_that_car_off():
