@@ -30,7 +30,6 @@ from . import stats
 from .command import command_parser, configured
 from .experiments import (
     Progress,
-    _pool,
     run_one,
     study_folder,
     study_options,
@@ -40,6 +39,7 @@ from .experiments import (
     with_attack,
     write_study,
 )
+from .pool import parallel
 
 LIAR = 1
 PARTNER = 3
@@ -83,9 +83,10 @@ acceptance's "detected within 3 s"); the others are bounded otherwise (README)."
 VARIANTS = {"on": trust_on, "off": trust_off, "wide": uniform_wide}
 
 
-def run_summary(args: tuple[Scenario, int]) -> dict:
-    """One seed of one fleet, summarised (a RUN dict; the record is dropped to save memory)."""
-    scenario, seed = args
+def run_summary(task: tuple) -> dict:
+    """One seed of one fleet, summarised (a RUN dict; the record is dropped to save memory);
+    ``task`` ends with the scenario and the seed (what comes before labels it)."""
+    *_, scenario, seed = task
     run, _ = run_one(scenario, seed)
     return run
 
@@ -104,14 +105,10 @@ def run_matrix(scenes: list[str], attacks: list[str], variants: list[str], seeds
                 tasks.extend((scene, attack, variant, made, seed) for seed in seeds)
     results: dict = {}
     progress = Progress(label, len(tasks))
-    with _pool(jobs) as pool:
-        futures = [(scene, attack, variant, seed, pool.submit(run_summary, (made, seed)))
-                   for scene, attack, variant, made, seed in tasks]
-        for scene, attack, variant, seed, future in futures:
-            run = future.result()
-            results.setdefault(scene, {}).setdefault(attack, {}).setdefault(variant, []).append(run)
-            progress.step(f"{scene} {attack} {variant} seed {seed}: least clearance "
-                          f"{run.get('liar_min_clearance', min(min(r) for r in run['min_clearance'])):.3f} m")
+    for (scene, attack, variant, _, seed), run in parallel(run_summary, tasks, jobs):
+        results.setdefault(scene, {}).setdefault(attack, {}).setdefault(variant, []).append(run)
+        progress.step(f"{scene} {attack} {variant} seed {seed}: least clearance "
+                      f"{run.get('liar_min_clearance', min(min(r) for r in run['min_clearance'])):.3f} m")
     progress.done()
     return results
 

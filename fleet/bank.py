@@ -42,7 +42,6 @@ import secrets
 import sys
 import time
 import tomllib
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -53,6 +52,7 @@ from ..agent.scenario_files import read_source, scenario_from_dict
 from .command import command_parser, configured
 from .experiments import BELIEVING, NO_TRUST, Progress, _sdf
 from .fleet_sim import simulate
+from .pool import parallel
 from .runs import RunRecord, motion_summary
 
 BANK = ("circle-4", "circle-8", "circle-16", "circle-obstacles-4", "circle-obstacles-8", "corridor-4",
@@ -212,12 +212,10 @@ def run_bank(scenes: dict[str, tuple[dict, str]], methods: list[str], seeds: dic
         print(f"{len(runs)} runs already in {journal}, {len(tasks)} to go", file=sys.stderr)
     tasks.sort(key=lambda task: -len(task[1].cars))  # the big scenes first: the pool ends together
     progress = Progress("bank", max(1, len(tasks)))
-    with ProcessPoolExecutor(max_workers=max(1, jobs)) as pool, journal.open("a") as log:
-        futures = {pool.submit(_case, task): task for task in tasks}
-        for future in as_completed(futures):
-            run = future.result()
+    with journal.open("a") as log:
+        for task, run in parallel(_case, tasks, jobs, ordered=False):
             run["group"] = groups[run["scene"]]
-            run["fingerprint"] = fingerprint(futures[future][1])
+            run["fingerprint"] = fingerprint(task[1])
             log.write(json.dumps(run) + "\n")
             log.flush()
             runs.append(run)
@@ -308,7 +306,12 @@ def main(argv: list[str] | None = None) -> int:
         seeds[data["name"]] = list(range(args.seed, args.seed + args.fresh_seeds))
     started = time.perf_counter()
     out.mkdir(parents=True, exist_ok=True)
-    runs = run_bank(scenes, args.methods, seeds, args.jobs, settings, groups, out / "runs.jsonl")
+    try:
+        runs = run_bank(scenes, args.methods, seeds, args.jobs, settings, groups, out / "runs.jsonl")
+    except KeyboardInterrupt:
+        print(f"\nstopped; every finished run is in {out / 'runs.jsonl'}: the same command carries on",
+              file=sys.stderr)
+        return 130
     from . import bank_report
     report = {
         "experiment": "bank",

@@ -28,7 +28,6 @@ import logging
 import os
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -41,6 +40,7 @@ from ..agent.scenario_files import load_scenario
 from ..agent.world import build_sdf
 from .command import command_parser, configured
 from .fleet_sim import simulate
+from .pool import parallel
 from .runs import RunRecord, motion_summary, plan_outcomes, rounded
 from .trust_record import TRUST_GAP, TRUST_SETTLE_S
 
@@ -204,8 +204,8 @@ def summarise(scenario: Scenario, record: RunRecord) -> dict:
 # --- a whole experiment ------------------------------------------------------------------------
 
 
-def _job(args: tuple[Scenario, int]) -> tuple[dict, RunRecord]:
-    scenario, seed = args
+def _job(task: tuple[str, Scenario, int]) -> tuple[dict, RunRecord]:
+    _, scenario, seed = task
     return run_one(scenario, seed)
 
 
@@ -219,13 +219,10 @@ def run_experiment(name: str, seeds: list[int], out: Path, jobs: int, scenario_f
     started = time.perf_counter()
     tasks = [(variant, make(base), seed) for variant, make in experiment.variants.items() for seed in seeds]
     progress = Progress(f"{name}", len(tasks))
-    with _pool(jobs) as pool:
-        futures = [(variant, seed, pool.submit(_job, (scenario, seed))) for variant, scenario, seed in tasks]
-        for variant, seed, future in futures:
-            run, record = future.result()
-            results.setdefault(variant, []).append(run)
-            records.setdefault(variant, []).append(record)
-            progress.step(f"{variant} seed {seed}: min clearance {np.min(np.array(run['min_clearance']) + np.eye(len(run['car_ids'])) * 9):.3f} m")
+    for (variant, _, seed), (run, record) in parallel(_job, tasks, jobs):
+        results.setdefault(variant, []).append(run)
+        records.setdefault(variant, []).append(record)
+        progress.step(f"{variant} seed {seed}: min clearance {np.min(np.array(run['min_clearance']) + np.eye(len(run['car_ids'])) * 9):.3f} m")
     progress.done()
     report = {
         "experiment": name,
@@ -243,28 +240,6 @@ def run_experiment(name: str, seeds: list[int], out: Path, jobs: int, scenario_f
         from . import figures as fig  # matplotlib only when figures are wanted
         fig.experiment_figures(name, base, results, records, target)
     return report
-
-
-class _Serial:
-    """A stand-in for a process pool when jobs == 1 (easier to debug and profile)."""
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        return False
-
-    def submit(self, fn, *args):
-        result = fn(*args)
-
-        class Done:
-            def result(self):
-                return result
-        return Done()
-
-
-def _pool(jobs: int):
-    return _Serial() if jobs <= 1 else ProcessPoolExecutor(max_workers=jobs)
 
 
 def summary(name: str, results: dict[str, list[dict]]) -> dict:

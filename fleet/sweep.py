@@ -31,7 +31,6 @@ from .adversaries import run_summary
 from .command import command_parser, configured
 from .experiments import (
     Progress,
-    _pool,
     study_folder,
     study_options,
     trust_off,
@@ -40,6 +39,7 @@ from .experiments import (
     with_liar,
     write_study,
 )
+from .pool import parallel
 
 
 def with_gain(scenario: Scenario, gain: float) -> Scenario:
@@ -83,12 +83,9 @@ def main(argv: list[str] | None = None) -> int:
              for fleet, make in made.items() for seed in seeds]
     results: dict = {}
     progress = Progress("transparency-sweep", len(tasks))
-    with _pool(args.jobs) as pool:
-        futures = [(p, fleet, seed, pool.submit(run_summary, (scenario, seed))) for p, fleet, scenario, seed in tasks]
-        for p, fleet, seed, future in futures:
-            run = future.result()
-            results.setdefault(str(p), {}).setdefault(fleet, []).append(run)
-            progress.step(f"p {p} {fleet} seed {seed}: liar clearance {run['liar_min_clearance']:.3f} m")
+    for (p, fleet, _, seed), run in parallel(run_summary, tasks, args.jobs):
+        results.setdefault(str(p), {}).setdefault(fleet, []).append(run)
+        progress.step(f"p {p} {fleet} seed {seed}: liar clearance {run['liar_min_clearance']:.3f} m")
     progress.done()
     summary = {p: {fleet: stats.cell(runs) for fleet, runs in by_fleet.items()} for p, by_fleet in results.items()}
     report = {"experiment": "transparency-sweep", "scene": args.scene, "seeds": seeds, "summary": summary,
