@@ -24,11 +24,8 @@ stopped (STOP from the first tick), says in one line what it waits for -- again 
 that changes -- and retries (NatNet from a connector thread, the bus every
 ``control.retry_s``): never a traceback.
 
-A car that does not move although it is told to (its command link is cut, it is
-blocked, its motors are off) is *stuck*: after ``STUCK_AFTER_S`` of commanded motion
-without motion, the process keeps commanding its plan (so the car goes again if it can)
-but tells its peers the truth -- a plan that stands still where the car stands -- so
-nobody waits for a car that announces it is about to drive through.
+A car that does not move although it is told to is *stuck* (bridge.motion_watch): the
+process keeps commanding its plan but tells its peers the truth, a plan that stands still.
 
 The planner (GTSAM, numpy) holds the GIL while it works; the control thread is kept
 responsive by a short interpreter switch interval, and its timing (command rate, jitter)
@@ -61,6 +58,7 @@ from ..agent.world import build_sdf
 from ..bridge import natnet
 from ..bridge.carlink import SOURCE_CAR_PROCESS, Answer, CommandSender, Flags, link_key
 from ..bridge.drive import drive
+from ..bridge.motion_watch import MotionWatch
 from ..bridge.natnet_client import NatNetClient, NatNetConnectionError, client_options
 from .bus import BusError, FleetBus, Received, zenoh_config
 from .car_report import ControlStats, WaitingLog, status_counters, waiting_for, write_stats
@@ -71,12 +69,9 @@ from .ticker import ticks
 log = logging.getLogger(__name__)
 
 SWITCH_INTERVAL_S = 0.001
-STUCK_AFTER_S = 0.8
 GAP_WINDOW_S = 5.0
 """The guard's command hold is the longest gap between control ticks over this window: a
 process that stalled lately is taken to stall again (tests/agent/test_guard.py)."""
-STUCK_COMMAND_MPS = 0.1
-STUCK_MOTION_MPS = 0.03
 
 
 class CarProcess:
@@ -117,8 +112,7 @@ class CarProcess:
         self._bodies = {c.body_id: c.id for c in scenario.cars}
         self._seq: Counter = Counter()
         self._alive: dict[int, bool] = {}
-        self.stuck = False
-        self._motion: deque = deque()  # (t, x, y, commanded v) of the control loop
+        self.motion = MotionWatch()  # is the car stuck?
         self.laps = Laps(car, scenario.control.laps, scenario.control.lap_turn_s)
 
     def _new_agent(self) -> CarAgent:
@@ -191,8 +185,7 @@ class CarProcess:
                 agent.receive(plan, at)
             self.agent = agent
             self.laps = Laps(self.car, self.scenario.control.laps, self.scenario.control.lap_turn_s)
-            self.stuck = False
-            self._motion.clear()
+            self.motion.clear()
         log.info("car %d: trial %d: start at %.2f (in %.2f s), cruise %.2f m/s", self.car.id,
                  self.operation.trial, depart, depart - now, cruise)
 
@@ -288,26 +281,12 @@ class CarProcess:
             else:
                 self.control.guard_limited += command.guard_limited
                 sender.send(command.v, command.omega, flags)
-                self._watch_motion(now, pose, command.v)
+                if self.motion.add(now, pose[0], pose[1], command.v):
+                    self.counters["stuck"] += self.motion.stuck
+                    log.log(logging.WARNING if self.motion.stuck else logging.INFO, "car %d: %s", self.car.id,
+                            "told to drive but not moving: telling peers it stands still" if self.motion.stuck
+                            else "moving again")
         self.control.sent += 1
-
-    def _watch_motion(self, now: float, pose: tuple[float, float, float], v_commanded: float) -> None:
-        """Set ``stuck`` while the car does not move though commanded to; clear it when it moves."""
-        self._motion.append((now, pose[0], pose[1], v_commanded))
-        while self._motion and self._motion[0][0] < now - STUCK_AFTER_S:
-            self._motion.popleft()
-        t0, x0, y0, _ = self._motion[0]
-        if now - t0 < 0.5 * STUCK_AFTER_S:
-            return
-        speed = math.hypot(pose[0] - x0, pose[1] - y0) / (now - t0)
-        commanded = min(v for *_, v in self._motion)
-        if not self.stuck and commanded > STUCK_COMMAND_MPS and speed < STUCK_MOTION_MPS and now - t0 >= 0.9 * STUCK_AFTER_S:
-            self.stuck = True
-            self.counters["stuck"] += 1
-            log.warning("car %d: commanded %.2f m/s but not moving: telling peers it stands still", self.car.id, commanded)
-        elif self.stuck and speed > 2 * STUCK_MOTION_MPS:
-            self.stuck = False
-            log.info("car %d: moving again", self.car.id)
 
     # --- the main loop -------------------------------------------------------------------------
 
@@ -438,7 +417,7 @@ class CarProcess:
 
     def _state(self) -> str:
         mode = self.operation.mode
-        if mode == Mode.DRIVING and self.stuck:
+        if mode == Mode.DRIVING and self.motion.stuck:
             return "stuck"
         return mode.value
 
@@ -474,7 +453,7 @@ class CarProcess:
         outgoing = self.agent.plan_message(now)
         own = self.agent.tracks.get(self.car.id)
         motion = own.motion() if own else None
-        if outgoing is not None and self.stuck and motion is not None:  # the truth: standing still
+        if outgoing is not None and self.motion.stuck and motion is not None:  # the truth: standing still
             outgoing = dataclasses.replace(outgoing, plan=standing(motion.position, now))
         if outgoing is not None:
             bus.publish("plan", messages.encode(outgoing), repeat=repeat)

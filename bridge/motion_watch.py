@@ -1,0 +1,50 @@
+"""A car that does not move although it is told to: its command link is cut, it is
+blocked, its motors are off.
+
+After ``STUCK_AFTER_S`` of commanded motion (every command above ``STUCK_COMMAND_MPS``)
+in which the car's own pose moved slower than ``STUCK_MOTION_MPS``, the car is *stuck*;
+it is moving again once it moves at twice that. The car process keeps commanding its
+plan (so the car goes again if it can) but tells its peers the truth -- a plan that
+stands still where the car stands -- so nobody waits for a car that announces it is
+about to drive through. Pure: the control loop passes the time, the pose and the command.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+
+STUCK_AFTER_S = 0.8
+STUCK_COMMAND_MPS = 0.1
+STUCK_MOTION_MPS = 0.03
+
+
+@dataclass
+class MotionWatch:
+    stuck: bool = False
+    samples: deque = field(default_factory=deque)
+    """(t, x, y, commanded v) of the control loop over the last STUCK_AFTER_S."""
+
+    def clear(self) -> None:
+        self.stuck = False
+        self.samples.clear()
+
+    def add(self, now: float, x: float, y: float, v_commanded: float) -> bool:
+        """Record one control tick; True when ``stuck`` changed."""
+        self.samples.append((now, x, y, v_commanded))
+        while self.samples and self.samples[0][0] < now - STUCK_AFTER_S:
+            self.samples.popleft()
+        t0, x0, y0, _ = self.samples[0]
+        if now - t0 < 0.5 * STUCK_AFTER_S:
+            return False
+        speed = math.hypot(x - x0, y - y0) / (now - t0)
+        commanded = min(v for *_, v in self.samples)
+        if (not self.stuck and commanded > STUCK_COMMAND_MPS and speed < STUCK_MOTION_MPS
+                and now - t0 >= 0.9 * STUCK_AFTER_S):
+            self.stuck = True
+            return True
+        if self.stuck and speed > 2 * STUCK_MOTION_MPS:
+            self.stuck = False
+            return True
+        return False

@@ -1,0 +1,35 @@
+"""A car told to drive that does not move is stuck; it is not once it moves."""
+
+from trustfg.bridge.motion_watch import STUCK_AFTER_S, MotionWatch
+
+
+def ticks(watch: MotionWatch, t0: float, seconds: float, speed: float, commanded: float, x0: float = 0.0) -> list[bool]:
+    """50 Hz ticks of a car moving at ``speed`` while told ``commanded``; the changes."""
+    changes = []
+    for k in range(int(seconds * 50)):
+        t = t0 + k / 50
+        changes.append(watch.add(t, x0 + speed * (t - t0), 0.0, commanded))
+    return changes
+
+
+def test_a_car_told_to_drive_that_stands_is_stuck_after_the_window_and_free_once_it_moves():
+    watch = MotionWatch()
+    changes = ticks(watch, 0.0, 2.0, speed=0.0, commanded=0.4)
+    assert watch.stuck and changes.count(True) == 1
+    assert changes.index(True) / 50 >= 0.9 * STUCK_AFTER_S  # not before the window is full
+    changes = ticks(watch, 2.0, 2.0, speed=0.3, commanded=0.4)
+    assert not watch.stuck and changes.count(True) == 1
+
+
+def test_a_car_that_moves_as_told_or_is_told_to_stand_is_not_stuck():
+    moving, standing = MotionWatch(), MotionWatch()
+    assert not any(ticks(moving, 0.0, 3.0, speed=0.3, commanded=0.3))
+    assert not any(ticks(standing, 0.0, 3.0, speed=0.0, commanded=0.05))  # a crawl it may not show
+    assert not moving.stuck and not standing.stuck
+
+
+def test_clear_forgets_the_window():
+    watch = MotionWatch()
+    ticks(watch, 0.0, 2.0, speed=0.0, commanded=0.4)
+    watch.clear()
+    assert not watch.stuck and not watch.samples
