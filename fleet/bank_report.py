@@ -172,7 +172,7 @@ def _shares(plans: dict) -> str:
 def _rate(rate: list[float], n: int) -> str:
     p, lo, hi = (100 * x for x in rate)
     if p == 0:
-        return f"0 (≤ {300 / n:.1f})"
+        return f"0 (≤ {min(100.0, 300 / n):.1f})"  # the rule of three, never above 100 %
     return f"{p:.1f} [{lo:.1f}, {hi:.1f}]"
 
 
