@@ -36,10 +36,12 @@ def _children(pid: int) -> list[int]:
 
 def test_ctrl_c_stops_the_runs_under_way_and_leaves_no_worker(tmp_path):
     """Two workers busy with hour-long runs: SIGINT to the parent (as a terminal sends it)
-    ends the parent within seconds, with KeyboardInterrupt, and no worker survives."""
+    ends the parent within seconds, with KeyboardInterrupt, and no worker survives. (A
+    concurrent.futures pool, which this replaced, ran its whole queue first.)"""
     script = tmp_path / "long.py"
     script.write_text(textwrap.dedent("""
-        import sys, time
+        import signal, sys, time
+        signal.signal(signal.SIGINT, signal.default_int_handler)  # a terminal's (a background job ignores it)
         from trustfg.fleet.pool import parallel
         try:
             for _ in parallel(time.sleep, [3600, 3600, 3600], 2):
