@@ -30,8 +30,8 @@ force -- the longest gap between the control loop's recent ticks, at most
 ``command_hold_max_s`` (the car's watchdog stops it by then) -- and never less than
 ``reaction_s``. A process starved of CPU (eight car processes on two cores: ticks 80-130 ms
 late, stalls over a second) thus drives slower near others instead of trusting 0.1 s.
-And a car that turns is checked at the heading it will have when the next command takes
-effect (yaw + omega t_r) as well as at its heading now: turning brings a car beside us
+And a car that turns is checked over the headings it sweeps until the next command takes
+effect, from yaw to yaw + omega t_r every TURN_STEP_RAD: turning brings a car beside us
 into the cone.
 
 Walls the same way: d - d_stop is replaced by how far the centre can go straight ahead
