@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .config import DeadlockConfig
-from .world import SignedDistanceField, free_regions, region_of
+from .world import SignedDistanceField
 
 DETOUR_TURNS_DEG = (0.0, 45.0, -45.0, 90.0, -90.0, 135.0, -135.0)
 """Directions a detour tries, turned from straight away from the cars that go first."""
@@ -111,10 +111,8 @@ class DeadlockWatch:
         first = [cid for cid in group if cid < self.car_id]
         if not first or not self.config.enabled:
             return None  # we go first (or resolution is off): keep trying for the goal
-        parked = [(tuple(p.goal), keep_clear) for p in peers.values() if p.goal is not None]
         goal = detour_goal(position, [_way(peers[cid]) for cid in first],
-                           [p.position for p in peers.values()], self.config.detour_m, keep_clear, sdf, wall_clear,
-                           home=(goal, free_regions(sdf, wall_clear, parked)))
+                           [p.position for p in peers.values()], self.config.detour_m, keep_clear, sdf, wall_clear)
         if goal is None:
             return None
         self.detour = Detour(goal, now + self.config.yield_s)
@@ -176,16 +174,10 @@ def _way(peer: PeerSeen) -> np.ndarray:
 
 
 def detour_goal(position: np.ndarray, ways: list[np.ndarray], everyone: list[np.ndarray], distance: float,
-                keep_clear: float, sdf: SignedDistanceField, wall_clear: float,
-                home: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray | None:
+                keep_clear: float, sdf: SignedDistanceField, wall_clear: float) -> np.ndarray | None:
     """A point ``distance`` from ``position`` as directly away from the nearest points of
     ``ways`` (of the cars that go first) as walls and cars allow, and ``keep_clear`` off
-    those ways and every car seen; None when every direction tried is blocked.
-
-    ``home``: our goal and the free regions of the map once the peers stand at their
-    goals (agent.world.free_regions): a detour must stay in our goal's region, or the cars
-    that arrive wall us into a pocket for good (bottleneck-4: a car that gave way into the
-    corner beside a door stood there 20 s, two cars parked across the way out)."""
+    those ways and every car seen; None when every direction tried is blocked."""
     position = np.asarray(position, float)
     nearest = [way[int(np.argmin(np.linalg.norm(way - position, axis=1)))] for way in ways]
     away = sum(((position - p) / max(float(np.linalg.norm(position - p)), 1e-6) for p in nearest), np.zeros(2))
@@ -198,8 +190,6 @@ def detour_goal(position: np.ndarray, ways: list[np.ndarray], everyone: list[np.
         if np.min(sdf.distance(way)) < wall_clear:
             continue
         if len(avoid) and np.min(np.linalg.norm(avoid - goal, axis=1)) < keep_clear:
-            continue
-        if home is not None and region_of(home[1], sdf, goal) != region_of(home[1], sdf, home[0]):
             continue
         return goal
     return None

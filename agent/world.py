@@ -124,33 +124,3 @@ def _rect_signed_distance(rect: Obstacle, x: float, y: float) -> float:
     if dx > 0 or dy > 0:
         return float(np.hypot(dx, dy))
     return -min(x - ax, bx - x, y - ay, by - y)
-
-
-def connected(sdf: SignedDistanceField, a, b, clearance: float,
-              keep_out: list[tuple[tuple[float, float], float]] = ()) -> bool:
-    """Whether a centre can move from ``a`` to ``b`` keeping ``clearance`` from every
-    obstacle and ``radius`` from every (point, radius) of ``keep_out``."""
-    regions = free_regions(sdf, clearance, keep_out)
-    return region_of(regions, sdf, a) != 0 and region_of(regions, sdf, a) == region_of(regions, sdf, b)
-
-
-def free_regions(sdf: SignedDistanceField, clearance: float,
-                 keep_out: list[tuple[tuple[float, float], float]] = ()) -> np.ndarray:
-    """The connected regions (labels > 0; 0: not free) of the distance field's own grid
-    cells that keep ``clearance`` from obstacles and ``radius`` from every (point, radius)
-    of ``keep_out``."""
-    ny, nx = sdf.values.shape
-    free = sdf.values >= clearance
-    xs = sdf.origin[0] + np.arange(nx) * sdf.cell_m
-    ys = sdf.origin[1] + np.arange(ny) * sdf.cell_m
-    for (px, py), radius in keep_out:
-        free &= (xs[None, :] - px) ** 2 + (ys[:, None] - py) ** 2 >= radius * radius
-    return ndimage.label(free)[0]
-
-
-def region_of(regions: np.ndarray, sdf: SignedDistanceField, p) -> int:
-    """The label of the grid cell nearest ``p`` (0: not free)."""
-    ny, nx = regions.shape
-    ix = int(np.clip(round((p[0] - sdf.origin[0]) / sdf.cell_m), 0, nx - 1))
-    iy = int(np.clip(round((p[1] - sdf.origin[1]) / sdf.cell_m), 0, ny - 1))
-    return int(regions[iy, ix])

@@ -17,6 +17,7 @@ keeps ``comfort`` (or what its two ends have, if less) is the next via point.
 from __future__ import annotations
 
 import numpy as np
+from scipy import ndimage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 
@@ -42,6 +43,26 @@ def segment_clear(sdf: SignedDistanceField, a: np.ndarray, b: np.ndarray, thresh
     count = max(2, int(np.ceil(np.linalg.norm(b - a) / SEGMENT_STEP_M)) + 1)
     points = a + np.linspace(0.0, 1.0, count)[:, None] * (b - a)
     return bool(np.all(sdf.distance(points) >= threshold))
+
+
+def connected(sdf: SignedDistanceField, a, b, clearance: float,
+              keep_out: list[tuple[tuple[float, float], float]] = ()) -> bool:
+    """Whether a centre can move from ``a`` to ``b`` keeping ``clearance`` from every
+    obstacle and ``radius`` from every (point, radius) of ``keep_out``: a and b lie in one
+    connected region of the free cells of the distance field's own grid."""
+    ny, nx = sdf.values.shape
+    free = sdf.values >= clearance
+    xs = sdf.origin[0] + np.arange(nx) * sdf.cell_m
+    ys = sdf.origin[1] + np.arange(ny) * sdf.cell_m
+    for (px, py), radius in keep_out:
+        free &= (xs[None, :] - px) ** 2 + (ys[:, None] - py) ** 2 >= radius * radius
+    regions, _ = ndimage.label(free)
+
+    def region(p) -> int:
+        ix = int(np.clip(round((p[0] - sdf.origin[0]) / sdf.cell_m), 0, nx - 1))
+        iy = int(np.clip(round((p[1] - sdf.origin[1]) / sdf.cell_m), 0, ny - 1))
+        return int(regions[iy, ix])
+    return region(a) != 0 and region(a) == region(b)
 
 
 def path_length(points: np.ndarray) -> float:

@@ -41,9 +41,9 @@ import numpy as np
 
 from ..agent.config import CarConfig, ConfigError, Obstacle, SafetyConfig, Scenario, SimConfig, WorldConfig
 from ..agent.scenario_files import dump_scenario, load_scenario
-from ..agent.world import SignedDistanceField, build_sdf, connected
+from ..agent.world import SignedDistanceField, build_sdf
 from .command import command_parser, configured
-from .routes import COMFORT_MARGIN_M, NoRoute, car_route, path_length
+from .routes import COMFORT_MARGIN_M, NoRoute, car_route, connected, path_length
 
 RADIUS_M = CarConfig(id=1, start=(0, 0), goal=(0, 0)).radius_m
 """Generated cars have the default radius."""

@@ -7,9 +7,8 @@ import numpy as np
 import pytest
 
 from trustfg.agent.config import DeadlockConfig, WorldConfig
-from trustfg.agent.deadlock import DeadlockWatch, PeerSeen, detour_goal
-from trustfg.agent.scenario_files import load_scenario
-from trustfg.agent.world import build_sdf, free_regions, region_of
+from trustfg.agent.deadlock import DeadlockWatch, PeerSeen
+from trustfg.agent.world import build_sdf
 
 CONFIG = DeadlockConfig()
 KEEP_CLEAR, WALL_CLEAR = 0.45, 0.25
@@ -96,23 +95,3 @@ def test_with_resolution_off_deadlocks_are_counted_but_nobody_gives_way(room):
     two = DeadlockWatch(2, dataclasses.replace(CONFIG, enabled=False))
     assert all(d is None for d in watch_for(2, two, CONFIG.window_s + 1.0, room))
     assert two.deadlocks == 1 and two.yields == 0
-
-
-def test_a_detour_never_leads_into_a_pocket_the_parked_cars_close():
-    """bottleneck-4 (a door in a wall), as a run of it went: car 2, beside the door on the
-    west, gives way to car 1 coming along the door's axis. Straight away from car 1 is the
-    corner south of it -- which cars 3 and 4, once at their goals, wall off from the door:
-    car 2 stood there for good. The detour now keeps to its goal's region."""
-    scene = load_scenario("bottleneck-4")
-    sdf = build_sdf(scene.world)
-    goals = {car.id: np.array(car.goal, float) for car in scene.cars}
-    position = np.array([-0.6, -0.35])
-    first = way(np.array([-1.2, 0.275]), goals[1])
-    parked = [(tuple(goals[cid]), KEEP_CLEAR) for cid in (1, 3, 4)]
-    regions = free_regions(sdf, WALL_CLEAR, parked)
-    home = region_of(regions, sdf, goals[2])
-
-    blind = detour_goal(position, [first], [], CONFIG.detour_m, KEEP_CLEAR, sdf, WALL_CLEAR)
-    assert blind is not None and region_of(regions, sdf, blind) != home  # into the pocket
-    kept = detour_goal(position, [first], [], CONFIG.detour_m, KEEP_CLEAR, sdf, WALL_CLEAR, home=(goals[2], regions))
-    assert kept is None or region_of(regions, sdf, kept) == home
