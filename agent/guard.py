@@ -100,14 +100,13 @@ def _cap_at(x: float, y: float, yaw: float, radius_m: float, others: list[tuple[
     return cap
 
 
-def stopping_speed(room: float, config: GuardConfig, reaction_s: float | None = None) -> float:
+def stopping_speed(room: float, config: GuardConfig, t_r: float) -> float:
     """v_max = a (-t_r + sqrt(t_r^2 + 2 room / a)): reaction plus braking distance = room."""
     if room <= 0.0:
         return 0.0
     if math.isinf(room):
         return math.inf
     a = config.decel_mps2
-    t_r = config.reaction_s if reaction_s is None else reaction_s
     return a * (-t_r + math.sqrt(t_r * t_r + 2.0 * room / a))
 
 

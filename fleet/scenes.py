@@ -25,8 +25,8 @@ its comfort from obstacles. Every scene is checked (:func:`check_scene`): a star
 closer than eps_obs to an obstacle or wall, or closer than eps_0 to another car's start
 (goal), or in which a car is cut off from its goal once the others stand at theirs
 (:func:`cut_off_by_parked`: a deadlock no planner resolves), is refused with one line and
-exit status 2; the generator draws again from the seed's stream until a layout passes. A scene's ``sim.timeout_s`` is set
-from its longest route, so a stuck run ends soon.
+exit status 2; the generator draws again from the seed's stream until a layout passes. A
+scene's ``sim.timeout_s`` is set from its longest route, so a stuck run ends soon.
 """
 
 from __future__ import annotations

@@ -203,7 +203,7 @@ def starved_approach(seed: int, measured: bool) -> float:
                                                      GUARD, SAFETY, reaction_s=t_r))
             commanded_at = t
             late = rng.choice([rng.uniform(0, 0.005), rng.uniform(0.02, 0.13), rng.uniform(0.2, 1.0)], p=[0.7, 0.25, 0.05])
-            gaps = [g for g in gaps[-250:]] + [0.02 + late]  # the last 5 s at 50 Hz, at most
+            gaps = gaps[-250:] + [0.02 + late]  # the last 5 s at 50 Hz, at most
             next_tick = t + 0.02 + late
         command = v if t - commanded_at <= 0.25 else 0.0  # the car's watchdog
         car = step(car, command, 0.0, 0.005, limits)
