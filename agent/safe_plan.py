@@ -15,6 +15,14 @@ plans have been tried, or (in the car process) ``budget_ms`` of CPU time has gon
                 pass the warm start could not reach (a warm-started plan never flips sides
                 on its own, and a route through the middle of a pillar feels no push to
                 either side).
+    around      when a peer the plan conflicts with stands (its plan moves it less than
+                STANDING_M: parked at its goal, waiting, stopped), cold along a grid route
+                (agent.routes) that keeps every standing peer's epsilon + AROUND_MARGIN_M
+                and the wall's epsilon: warm starts and lane keeping pull a plan through
+                a car that parked on its lane, and no bump finds the way round a car
+                parked beside a doorway (a bank run had a car that gave way stand 20 s
+                0.6 m from a parked car, every replan failing against it). The arrival
+                slips by the route's extra length.
     slower      a later arrival (the horizon half as long again), cold: the car lets the
                 others through first; with the lingering paces of the cold start this
                 includes waiting in place.
@@ -24,7 +32,8 @@ plans have been tried, or (in the car process) ``budget_ms`` of CPU time has gon
                 off its lane for 45 s, every replan a fallback).
     cold        the planner's cold start (the route at several paces, the cheapest first).
 
-A plan that breaks only the vehicle's limits tries ``slower``, then ``off lane``, first.
+A plan that breaks only the vehicle's limits tries ``slower``, then ``off lane``, first;
+``around`` is tried only where it applies (else the next one is).
 
 When nothing verifies, the car commits to the fallback (agent.fallback): a braking
 trajectory along its last verified plan that stops short of everything it knows of (or
@@ -50,6 +59,7 @@ from .config import PlannerConfig, VerifyConfig
 from .fallback import fallback
 from .gp import Plan
 from .planner import PeerConstraint, PlanningError, PlanRequest, PlanResult, plan_trajectory
+from .routes import NoRoute, path_length, plan_route
 from .verify import Bounds, Conflict, Verdict, verify
 from .world import SignedDistanceField
 
@@ -65,6 +75,13 @@ OBSTACLE_PUSH_M = 0.05
 """``other side`` of a wall pushes this much further out than the plan lacks."""
 TIGHTEN_PAD = 1.25
 """``tighten`` raises a broken epsilon by this times how far it was broken."""
+STANDING_M = 0.05
+"""A peer whose plan moves it less than this over its span stands (``around``)."""
+AROUND_MARGIN_M = 0.05
+"""``around`` keeps this beyond a standing peer's epsilon (the hinges settle a little
+inside it)."""
+AROUND_COMFORT_M = 0.1
+"""... and this beyond every clearance where the way is wide enough."""
 
 
 @dataclass(frozen=True)
@@ -138,12 +155,16 @@ def _next_attempt(request: PlanRequest, tried: list[str], failed: PlanResult | N
     conflicts = verdict.conflicts if verdict else ()
     distance = [c for c in conflicts if c.kind != "limits"]
     limits_only = bool(conflicts) and not distance
-    order = ["slower", "off lane", "cold"] if limits_only else ["tighten", "other side", "slower", "cold"]
+    order = ["slower", "off lane", "cold"] if limits_only else ["tighten", "around", "other side", "slower", "cold"]
     for name in order:
         if name in tried:
             continue
         if name == "tighten" and failed is not None and distance:
             return name, tightened(request, failed.plan, distance)
+        if name == "around" and distance:
+            way = around_standing(request, distance, sdf)
+            if way is not None:
+                return name, way
         if name == "other side" and failed is not None and distance:
             return name, dataclasses.replace(request, warm_start=other_side(failed.plan, distance[0], request, sdf))
         if name == "off lane" and request.lane:
@@ -166,6 +187,32 @@ def tightened(request: PlanRequest, failed: Plan, conflicts: list[Conflict]) -> 
     wall = max((c.excess for c in conflicts if c.kind == "obstacle"), default=0.0)
     return dataclasses.replace(request, peers=peers, warm_start=failed,
                                epsilon_obstacle=request.epsilon_obstacle + TIGHTEN_PAD * wall)
+
+
+def standing(plan: Plan, since: float) -> bool:
+    """Whether ``plan`` moves its car less than STANDING_M from ``since`` on."""
+    times = np.linspace(max(since, plan.t0), max(since, plan.t_end), 12)
+    positions = plan.position_at(times)
+    return float(np.max(np.linalg.norm(positions - positions[0], axis=1))) < STANDING_M
+
+
+def around_standing(request: PlanRequest, conflicts: list[Conflict], sdf: SignedDistanceField) -> PlanRequest | None:
+    """The request cold along a route round every standing peer, when one of them is among
+    ``conflicts``; None when none is, or no route keeps the clearances."""
+    still = [i for i, peer in enumerate(request.peers) if standing(peer.plan, request.t_now)]
+    if not any(c.kind == "peer" and c.peer in still for c in conflicts):
+        return None
+    keep_out = [(tuple(np.ravel(request.peers[i].plan.position_at(request.t_now))), request.peers[i].epsilon + AROUND_MARGIN_M)
+                for i in still]
+    clearance = request.epsilon_obstacle
+    try:
+        route = plan_route(sdf, None, request.position, request.goal, clearance, clearance + AROUND_COMFORT_M, keep_out)
+    except NoRoute:
+        return None
+    before = path_length(np.array([request.position, *request.route, request.goal], dtype=float))
+    after = path_length(np.array([request.position, *route, request.goal], dtype=float))
+    horizon = max(request.t_arrive - request.t_now, 0.0) * max(1.0, after / max(before, 1e-6))
+    return dataclasses.replace(request, warm_start=None, route=route, lane=(), t_arrive=request.t_now + horizon)
 
 
 def other_side(plan: Plan, conflict: Conflict, request: PlanRequest, sdf: SignedDistanceField) -> Plan:

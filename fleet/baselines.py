@@ -10,7 +10,7 @@ stepped at ``control.command_rate_hz``, with the same start delays and cruise sp
 Every step, per car:
 
 1. preferred velocity: towards its next via point (the scene's route, or where a car has
-   none and the straight line is blocked, one from fleet.routes; then the goal) at
+   none and the straight line is blocked, one from agent.routes; then the goal) at
    its cruise speed, slowing as v = min(cruise, |goal - p| / GOAL_SLOWDOWN_S) into the
    goal, zero before its departure and once it has arrived; plus RVO2's customary
    perturbation of 1e-4 m/s in a seeded random direction (it breaks exact symmetries).
@@ -49,11 +49,11 @@ import time
 import numpy as np
 
 from ..agent.config import Obstacle, Scenario
+from ..agent.routes import car_route
 from ..agent.vehicle import VehicleState
 from ..agent.vehicle import step as vehicle_step
 from ..agent.world import SignedDistanceField, build_sdf
 from .fleet_sim import draw_departures
-from .routes import car_route
 from .runs import RunRecord
 
 NEIGHBOR_DIST_M = 3.0

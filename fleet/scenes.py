@@ -20,7 +20,7 @@ eps_obs from walls; r = 0.1 m gives 0.45 m and 0.25 m):
 * ``random-field``: a square room with 4-7 random convex obstacles (every gap between
   them, and to the walls, lets a car through) and random starts and goals.
 
-Every car gets a route (via points, fleet.routes) where the straight line would not keep
+Every car gets a route (via points, agent.routes) where the straight line would not keep
 its comfort from obstacles. Every scene is checked (:func:`check_scene`): a start or goal
 closer than eps_obs to an obstacle or wall, or closer than eps_0 to another car's start
 (goal), or in which a car is cut off from its goal once the others stand at theirs
@@ -40,10 +40,10 @@ from typing import Callable
 import numpy as np
 
 from ..agent.config import CarConfig, ConfigError, Obstacle, SafetyConfig, Scenario, SimConfig, WorldConfig
+from ..agent.routes import COMFORT_MARGIN_M, NoRoute, car_route, connected, path_length
 from ..agent.scenario_files import dump_scenario, load_scenario
 from ..agent.world import SignedDistanceField, build_sdf
 from .command import command_parser, configured
-from .routes import COMFORT_MARGIN_M, NoRoute, car_route, connected, path_length
 
 RADIUS_M = CarConfig(id=1, start=(0, 0), goal=(0, 0)).radius_m
 """Generated cars have the default radius."""

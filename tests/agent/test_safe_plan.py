@@ -11,7 +11,7 @@ from trustfg.agent.config import Obstacle, PlannerConfig, SafetyConfig, VehicleC
 from trustfg.agent.fallback import brake_after, fallback
 from trustfg.agent.gp import Plan, standing
 from trustfg.agent.planner import PeerConstraint, PlanRequest
-from trustfg.agent.safe_plan import FALLBACK, FIRST, RETRY, UNVERIFIED, plan_safely
+from trustfg.agent.safe_plan import AROUND_MARGIN_M, FALLBACK, FIRST, RETRY, UNVERIFIED, around_standing, plan_safely
 from trustfg.agent.verify import Bounds, verify
 from trustfg.agent.world import build_sdf
 
@@ -74,9 +74,10 @@ def test_a_plan_that_fails_verification_is_not_used_the_car_stops_short(narrow):
 
 
 def test_a_plan_through_the_middle_of_a_peer_is_retried_on_its_other_side(room):
-    """A warm start right through a standing peer feels no push to either side (the hinge's
-    gradient vanishes at its centre): warm and tightened plans fail; 'other side' passes."""
-    peer = standing(np.array([0.0, 0.0]), 0.0)
+    """A warm start right through a peer (creeping towards us) feels no push to either
+    side (the hinge's gradient vanishes at its centre): warm and tightened plans fail;
+    'other side' passes."""
+    peer = straight((0.1, 0.0), (-0.1, 0.0))
     through = straight((-2.0, 0.0), (2.0, 0.0))
     request = PlanRequest(0.0, np.array([-2.0, 0.0]), np.zeros(2), np.array([2.0, 0.0]), 10.0,
                           SAFETY.epsilon_obstacle(R), peers=(PeerConstraint(peer, EPS),), warm_start=through)
@@ -164,3 +165,30 @@ def test_off_its_lane_the_lane_alone_asks_more_than_the_car_can(room):
     fallbacks = [plan_safely(standing_off_its_lane(seed), bounds(0), PLANNER, no_retry, room, None).outcome
                  for seed in range(12)]
     assert fallbacks.count(FALLBACK) >= 9, fallbacks  # measured: 11 of 12
+
+
+def test_a_plan_through_a_parked_peer_is_retried_along_a_route_round_it(room):
+    """The same through a peer that stands: 'around' seeds the plan on a grid route that
+    keeps the peer's epsilon, and it verifies."""
+    peer = standing(np.array([0.0, 0.0]), 0.0)
+    through = straight((-2.0, 0.0), (2.0, 0.0))
+    request = PlanRequest(0.0, np.array([-2.0, 0.0]), np.zeros(2), np.array([2.0, 0.0]), 10.0,
+                          SAFETY.epsilon_obstacle(R), peers=(PeerConstraint(peer, EPS),), warm_start=through,
+                          lane=((-2.0, 0.0),))
+    outcome = plan_safely(request, bounds(1), PLANNER, CONFIG, room, None)
+    assert outcome.outcome == RETRY and "around" in outcome.tried
+    assert verify(outcome.plan, request.peers, bounds(1), room, CONFIG).ok
+    detour = around_standing(request, verify(through, request.peers, bounds(1), room, CONFIG).conflicts, room)
+    assert detour.lane == () and detour.warm_start is None and detour.t_arrive > request.t_arrive
+    route = np.array([request.position, *detour.route, request.goal])
+    samples = np.vstack([np.linspace(a, b, 50) for a, b in zip(route[:-1], route[1:])])
+    assert np.min(np.linalg.norm(samples, axis=1)) >= EPS + AROUND_MARGIN_M - 0.03  # a grid cell's slack
+
+
+def test_around_is_for_peers_that_stand_only(room):
+    creeping = straight((0.0, -0.1), (0.0, 0.1))
+    through = straight((-2.0, 0.0), (2.0, 0.0))
+    request = PlanRequest(0.0, np.array([-2.0, 0.0]), np.zeros(2), np.array([2.0, 0.0]), 10.0,
+                          SAFETY.epsilon_obstacle(R), peers=(PeerConstraint(creeping, EPS),), warm_start=through)
+    conflicts = verify(through, request.peers, bounds(1), room, CONFIG).conflicts
+    assert conflicts and around_standing(request, conflicts, room) is None

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from trustfg.agent.config import Obstacle, WorldConfig
+from trustfg.agent.routes import NoRoute, plan_route, segment_clear
 from trustfg.agent.world import build_sdf
-from trustfg.fleet.routes import NoRoute, plan_route, segment_clear
 
 BOUNDS = (-2.0, -1.5, 2.0, 1.5)
 CLEARANCE, COMFORT = 0.25, 0.4

@@ -12,17 +12,31 @@ costs its length times
 (so routes keep to the middle of a passage where they can), found by scipy's Dijkstra,
 then shortened: from each kept point, the farthest later grid point whose straight segment
 keeps ``comfort`` (or what its two ends have, if less) is the next via point.
+
+A replan uses the same search to get round cars that stand (agent.safe_plan, ``around``):
+each is a disc of keep-out (centre c, radius r) that counts as an obstacle whose surface
+lies ``clearance`` inside the disc's rim, so the distance searched on is
+
+    d'(z) = min(d(z), min_k |z - c_k| - r_k + clearance)
+
+and keeping ``clearance`` in d' keeps r_k from every c_k.
 """
 
 from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 from scipy import ndimage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 
-from ..agent.config import CarConfig, Scenario
-from ..agent.world import SignedDistanceField
+from .config import CarConfig, Scenario
+from .world import SignedDistanceField
+
+KeepOut = tuple[tuple[float, float], float]
+"""A disc a route keeps out of: (centre, radius), m."""
 
 GRID_M = 0.05
 """Cell size of the route search, m."""
@@ -78,11 +92,19 @@ def car_route(scenario: Scenario, car: CarConfig, sdf: SignedDistanceField) -> t
     return plan_route(sdf, scenario.world.bounds_m, car.start, car.goal, eps_obs, eps_obs + COMFORT_MARGIN_M)
 
 
-def plan_route(sdf: SignedDistanceField, bounds: tuple[float, float, float, float], start, goal,
-               clearance: float, comfort: float) -> tuple[tuple[float, float], ...]:
+def plan_route(sdf: SignedDistanceField, bounds: tuple[float, float, float, float] | None, start, goal,
+               clearance: float, comfort: float, keep_out: Sequence[KeepOut] = ()) -> tuple[tuple[float, float], ...]:
     """Via points (start and goal excluded) from ``start`` to ``goal``; NoRoute if none
-    keeps ``clearance``."""
+    keeps ``clearance`` from obstacles and out of every disc of ``keep_out``. ``bounds``
+    (x0, y0, x1, y1) of the search: None, the distance field's own extent."""
     start, goal = np.asarray(start, dtype=float), np.asarray(goal, dtype=float)
+    if bounds is None:
+        ny, nx = sdf.values.shape
+        bounds = (sdf.origin[0], sdf.origin[1], sdf.origin[0] + (nx - 1) * sdf.cell_m,
+                  sdf.origin[1] + (ny - 1) * sdf.cell_m)
+    if keep_out:
+        sdf = _WithDiscs(sdf, np.array([c for c, _ in keep_out], dtype=float),
+                         np.array([r for _, r in keep_out], dtype=float), clearance)
     ends = float(min(sdf.distance(start[None])[0], sdf.distance(goal[None])[0]))
     if segment_clear(sdf, start, goal, min(comfort, ends)):
         return ()
@@ -103,6 +125,21 @@ def _shortcut(sdf: SignedDistanceField, points: np.ndarray, comfort: float) -> n
         kept.append(j)
         i = j
     return points[kept]
+
+
+@dataclass(frozen=True)
+class _WithDiscs:
+    """A distance field with keep-out discs as obstacles (the module's d')."""
+
+    sdf: SignedDistanceField
+    centres: np.ndarray
+    radii: np.ndarray
+    clearance: float
+
+    def distance(self, points: np.ndarray) -> np.ndarray:
+        points = np.asarray(points, dtype=float)
+        gaps = np.linalg.norm(points[..., None, :] - self.centres, axis=-1) - self.radii + self.clearance
+        return np.minimum(self.sdf.distance(points), gaps.min(axis=-1))
 
 
 class _Grid:
