@@ -279,8 +279,10 @@ class CarAgent:
         if self.at_goal or (np.linalg.norm(motion.position - goal) <= self.scenario.tracking.goal_tolerance_m
                             and now >= self.depart_at):
             self.at_goal = True
-            self.plan = standing(motion.position, now)
-            return None
+            if self._step_aside(now, motion.position) is None:
+                self.plan = standing(motion.position, now)
+                return None
+            self.at_goal = False  # parked across a peer's only way: the detour below, then back
         t0 = max(now, self.depart_at)
         position, velocity = self._start_state(motion, t0, now)
         remaining = self._remaining_length(motion.position, t0)
@@ -329,6 +331,17 @@ class CarAgent:
             if count:
                 self.counters[name] = count
         return detour
+
+    def _step_aside(self, now: float, position: np.ndarray) -> np.ndarray | None:
+        """Parked at our goal: where to step aside to when we wall a stalled peer in
+        (agent.deadlock), else None. Counts ``deadlock_steps_aside``."""
+        seen = peers_seen(self.tracks, self.peers, self.car.id, now, self.scenario.arrival_radius_m)
+        safety, r = self.scenario.safety, self.car.radius_m
+        aside = self.deadlock.step_aside(now, position, np.asarray(self.car.goal, float), seen,
+                                         safety.epsilon_0(r, r), self.sdf, safety.epsilon_obstacle(r))
+        if self.deadlock.steps_aside:
+            self.counters["deadlock_steps_aside"] = self.deadlock.steps_aside
+        return aside
 
     def _bounds(self, peers: list[int]) -> Bounds:
         """What our plans must keep from the walls and from each of ``peers`` (SafetyConfig)."""

@@ -27,6 +27,18 @@ goes first without a message; the one that goes first finds room as the others m
 it, and once it has left, the next in line goes first. Each detection counts one
 deadlock (``deadlocks``), each detour one yield (``deadlock_yields``).
 
+A car parked at its goal is no member of any group, and it can wall a car in for good: a
+car that gave way into the corner beside a door, and a peer parks at its goal between
+that corner and the door (bottleneck-4: 13 of 50 bank runs, every one this way). So a
+parked car steps aside (``step_aside``) when a peer that is stalled, not at its goal,
+has no way to its goal -- no connected free space keeping the wall's epsilon from walls
+and eps_0 from every parked car (agent.routes.connected) -- while it would have one
+were we not where we stand. It drives ``detour_m`` to the first side (straight away from
+the walled-in car, then turning by DETOUR_TURNS_DEG) from where the way is open, holds
+there until the peer is at its goal or has a way round our goal, at least ``yield_s`` and
+at most ASIDE_MAX_YIELDS of those, and drives back. Each counts one step aside
+(``deadlock_steps_aside``).
+
 Pure: the caller passes the time and what its car sees.
 """
 
@@ -39,6 +51,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .config import DeadlockConfig
+from .routes import connected
 from .world import SignedDistanceField
 
 DETOUR_TURNS_DEG = (0.0, 45.0, -45.0, 90.0, -90.0, 135.0, -135.0)
@@ -49,6 +62,8 @@ SEEN_S = 0.5
 WAITING_S = 0.05
 """A peer whose latest plan starts this much after it was sent has not departed yet."""
 WAY_SAMPLES = 20
+ASIDE_MAX_YIELDS = 4
+"""A step aside ends after at most this many ``yield_s``, walled-in peer or not."""
 
 
 @dataclass(frozen=True)
@@ -70,6 +85,12 @@ class PeerSeen:
 class Detour:
     goal: np.ndarray
     until: float
+    for_peer: int | None = None
+    """A step aside: the walled-in peer it makes way for (held while the peer needs it)."""
+    home: np.ndarray | None = None
+    """... and the goal we stepped aside from."""
+    latest: float = 0.0
+    """... and the latest it ends."""
 
 
 @dataclass
@@ -82,6 +103,7 @@ class DeadlockWatch:
     deadlocked: bool = False
     deadlocks: int = 0
     yields: int = 0
+    steps_aside: int = 0
 
     def goal(self, now: float, position: np.ndarray, goal: np.ndarray, peers: dict[int, PeerSeen], departed: bool,
              keep_clear: float, sdf: SignedDistanceField, wall_clear: float,
@@ -93,14 +115,11 @@ class DeadlockWatch:
         ``keep_clear``: how far a detour goal must stay from every car we see (centres);
         ``wall_clear``: from every wall (centre to surface), along the way there too."""
         if self.detour is not None:
-            if now < self.detour.until:
+            if now < self.detour.until or self._still_needed(now, peers, keep_clear, sdf, wall_clear):
                 return self.detour.goal
             self.detour = None
             self.history.clear()  # a fresh window before the next detection
-        self.history.append((now, {self.car_id: (np.asarray(position, float), np.asarray(goal, float))}
-                             | {cid: (p.position, p.goal) for cid, p in peers.items()}))
-        while self.history and self.history[0][0] < now - self.config.window_s - 1e-9:
-            self.history.popleft()
+        self._record(now, position, goal, peers)
         group = self.group(now, peers, blockers) if departed else []
         if not group:
             self.deadlocked = False
@@ -119,6 +138,53 @@ class DeadlockWatch:
         self.deadlocked = False
         self.yields += 1
         return goal
+
+    def step_aside(self, now: float, position: np.ndarray, goal: np.ndarray, peers: dict[int, PeerSeen],
+                   keep_clear: float, sdf: SignedDistanceField, wall_clear: float) -> np.ndarray | None:
+        """For a car parked at its goal: record what we see; where to step aside to when we
+        wall in a stalled peer (module docstring), else None."""
+        if self.detour is not None and self.detour.for_peer is not None and now < self.detour.until:
+            return self.detour.goal
+        self._record(now, position, goal, peers)
+        if not self.config.enabled:
+            return None
+        position = np.asarray(position, float)
+        for cid, peer in sorted(peers.items()):
+            if peer.at_goal or peer.waiting or peer.goal is None or not self.stalled(cid, now):
+                continue
+            parked = [(tuple(p.position), keep_clear) for other, p in peers.items() if other != cid and p.at_goal]
+            if connected(sdf, peer.position, peer.goal, wall_clear, [*parked, (tuple(position), keep_clear)]):
+                continue
+            if not connected(sdf, peer.position, peer.goal, wall_clear, parked):
+                continue  # walled in, but not by us alone
+            aside = _aside_goal(position, peer, parked, [p.position for p in peers.values()], self.config.detour_m,
+                                keep_clear, sdf, wall_clear)
+            if aside is None:
+                continue
+            self.detour = Detour(aside, now + self.config.yield_s, cid, np.array(position),
+                                 now + ASIDE_MAX_YIELDS * self.config.yield_s)
+            self.steps_aside += 1
+            return aside
+        return None
+
+    def _still_needed(self, now: float, peers: dict[int, PeerSeen], keep_clear: float, sdf: SignedDistanceField,
+                      wall_clear: float) -> bool:
+        """Whether a step aside holds on: its peer is not at its goal and, were we back
+        home, would have no way there (up to ``Detour.latest``)."""
+        detour = self.detour
+        if detour is None or detour.for_peer is None or now >= detour.latest:
+            return False
+        peer = peers.get(detour.for_peer)
+        if peer is None or peer.at_goal or peer.goal is None:
+            return False
+        parked = [(tuple(p.position), keep_clear) for cid, p in peers.items() if cid != detour.for_peer and p.at_goal]
+        return not connected(sdf, peer.position, peer.goal, wall_clear, [*parked, (tuple(detour.home), keep_clear)])
+
+    def _record(self, now: float, position: np.ndarray, goal: np.ndarray, peers: dict[int, PeerSeen]) -> None:
+        self.history.append((now, {self.car_id: (np.asarray(position, float), np.asarray(goal, float))}
+                             | {cid: (p.position, p.goal) for cid, p in peers.items()}))
+        while self.history and self.history[0][0] < now - self.config.window_s - 1e-9:
+            self.history.popleft()
 
     def group(self, now: float, peers: dict[int, PeerSeen], blockers: frozenset[int] = frozenset()) -> list[int]:
         """The peers near us or in our way (not at their goals, not waiting to depart),
@@ -192,4 +258,25 @@ def detour_goal(position: np.ndarray, ways: list[np.ndarray], everyone: list[np.
         if len(avoid) and np.min(np.linalg.norm(avoid - goal, axis=1)) < keep_clear:
             continue
         return goal
+    return None
+
+
+def _aside_goal(position: np.ndarray, peer: PeerSeen, parked: list, everyone: list[np.ndarray], distance: float,
+                keep_clear: float, sdf: SignedDistanceField, wall_clear: float) -> np.ndarray | None:
+    """A point ``distance`` from ``position``, reached along a clear segment and
+    ``keep_clear`` off every car seen, from where we no longer wall ``peer`` in (first
+    straight away from it, then turning); None if there is none."""
+    away = position - peer.position
+    base = math.atan2(away[1], away[0]) if np.linalg.norm(away) > 1e-6 else 0.0
+    others = np.array([p for p in everyone if np.linalg.norm(p - position) > 1e-6]).reshape(-1, 2)
+    for turn in DETOUR_TURNS_DEG + (180.0,):
+        angle = base + math.radians(turn)
+        goal = position + distance * np.array([math.cos(angle), math.sin(angle)])
+        way = position + np.linspace(0.0, 1.0, SEGMENT_SAMPLES)[1:, None] * (goal - position)
+        if np.min(sdf.distance(way)) < wall_clear:
+            continue
+        if len(others) and np.min(np.linalg.norm(others - goal, axis=1)) < keep_clear:
+            continue
+        if connected(sdf, peer.position, peer.goal, wall_clear, [*parked, (tuple(goal), keep_clear)]):
+            return goal
     return None

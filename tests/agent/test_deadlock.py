@@ -6,8 +6,9 @@ import dataclasses
 import numpy as np
 import pytest
 
-from trustfg.agent.config import DeadlockConfig, WorldConfig
+from trustfg.agent.config import DeadlockConfig, Obstacle, WorldConfig
 from trustfg.agent.deadlock import DeadlockWatch, PeerSeen
+from trustfg.agent.routes import connected
 from trustfg.agent.world import build_sdf
 
 CONFIG = DeadlockConfig()
@@ -95,3 +96,64 @@ def test_with_resolution_off_deadlocks_are_counted_but_nobody_gives_way(room):
     two = DeadlockWatch(2, dataclasses.replace(CONFIG, enabled=False))
     assert all(d is None for d in watch_for(2, two, CONFIG.window_s + 1.0, room))
     assert two.deadlocks == 1 and two.yields == 0
+
+
+# A parked car that walls a peer in (bottleneck-4): a wall across the room with a 1.2 m
+# gap on the right; we are parked in the gap, the peer stands in the pocket below.
+POCKET_WALL = Obstacle(kind="rect", min=(-1.5, -0.05), max=(0.3, 0.05))
+PARKED_IN_GAP = np.array([0.9, 0.0])
+WALLED_IN = PeerSeen(np.array([-0.7, -0.8]), goal=np.array([-0.7, 0.8]))
+
+
+@pytest.fixture(scope="module")
+def pocket():
+    return build_sdf(WorldConfig(bounds_m=(-1.5, -1.5, 1.5, 1.5), resolution_m=0.02, obstacles=(POCKET_WALL,)))
+
+
+def parked_for(watch: DeadlockWatch, seconds: float, pocket, peer: PeerSeen = WALLED_IN, start: float = 0.0,
+               others: dict | None = None) -> list:
+    """Feed a parked car's watch a peer that stands still; the step-aside goals it returns."""
+    return [watch.step_aside(t, PARKED_IN_GAP, PARKED_IN_GAP, {2: peer} | (others or {}), KEEP_CLEAR, pocket,
+                             WALL_CLEAR) for t in np.arange(start, start + seconds, STEP_S)]
+
+
+def test_a_parked_car_that_walls_a_stalled_peer_in_steps_aside_to_where_the_way_is_open(pocket):
+    assert not connected(pocket, WALLED_IN.position, WALLED_IN.goal, WALL_CLEAR, [(tuple(PARKED_IN_GAP), KEEP_CLEAR)])
+    watch = DeadlockWatch(1, CONFIG)
+    asides = parked_for(watch, CONFIG.window_s + 1.0, pocket)
+    first = next(i for i, a in enumerate(asides) if a is not None)
+    assert first * STEP_S >= CONFIG.window_s - 0.3  # not before the peer has been stalled a window
+    aside = asides[first]
+    assert watch.steps_aside == 1
+    assert np.linalg.norm(aside - PARKED_IN_GAP) == pytest.approx(CONFIG.detour_m)
+    assert connected(pocket, WALLED_IN.position, WALLED_IN.goal, WALL_CLEAR, [(tuple(aside), KEEP_CLEAR)])
+
+
+def test_with_resolution_off_a_parked_car_stays_put(pocket):
+    watch = DeadlockWatch(1, dataclasses.replace(CONFIG, enabled=False))
+    assert all(a is None for a in parked_for(watch, CONFIG.window_s + 2.0, pocket))
+
+
+def test_no_step_aside_for_a_peer_that_has_a_way_or_is_walled_in_by_others_too(pocket):
+    free = PeerSeen(np.array([-0.7, 0.5]), goal=np.array([-0.7, 1.0]))  # on our side of the wall
+    watch = DeadlockWatch(1, CONFIG)
+    assert all(a is None for a in parked_for(watch, CONFIG.window_s + 2.0, pocket, peer=free))
+    # a second car parked in the gap: our stepping aside alone would not open it
+    other = {3: PeerSeen(np.array([0.95, 0.0]), at_goal=True, goal=np.array([0.95, 0.0]))}
+    watch = DeadlockWatch(1, CONFIG)
+    assert all(a is None for a in parked_for(watch, CONFIG.window_s + 2.0, pocket, others=other))
+
+
+def test_a_step_aside_holds_while_the_peer_is_walled_in_and_ends_once_it_is_through(pocket):
+    watch = DeadlockWatch(1, CONFIG)
+    aside = next(a for a in parked_for(watch, CONFIG.window_s + 1.0, pocket) if a is not None)
+    started = watch.detour.until - CONFIG.yield_s
+    here = {2: WALLED_IN}
+    late = started + CONFIG.yield_s + 1.0  # the peer has not moved: we hold on
+    assert np.array_equal(watch.goal(late, aside, PARKED_IN_GAP, here, True, KEEP_CLEAR, pocket, WALL_CLEAR), aside)
+    through = {2: PeerSeen(np.array([-0.7, 0.5]), goal=WALLED_IN.goal)}  # past the wall
+    assert watch.goal(late + STEP_S, aside, PARKED_IN_GAP, through, True, KEEP_CLEAR, pocket, WALL_CLEAR) is None
+    stuck_for_good = DeadlockWatch(1, CONFIG)
+    next(a for a in parked_for(stuck_for_good, CONFIG.window_s + 1.0, pocket) if a is not None)
+    end = stuck_for_good.detour.latest
+    assert stuck_for_good.goal(end + 0.01, aside, PARKED_IN_GAP, here, True, KEEP_CLEAR, pocket, WALL_CLEAR) is None
