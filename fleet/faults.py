@@ -246,7 +246,7 @@ def not_arrived(out: Path, summary: dict) -> dict[int, dict]:
                 if record.get("kind") == "status" and message.get("id") in ids:
                     status[message["id"]] = message
     keep = ("plans_first", "plans_retry", "plans_fallback", "guard_limited", "deadlocks", "deadlock_yields",
-            "stale_pose_stops")
+            "deadlock_steps_aside", "stale_pose_stops")
     return {car: {"at": where.get(car), "state": status.get(car, {}).get("state"),
                   **{k: v for k, v in status.get(car, {}).get("counters", {}).items() if k in keep}}
             for car in ids}

@@ -91,20 +91,22 @@ def rounded(matrix: np.ndarray) -> list[list[float]]:
     return [[round(float(x), 4) for x in row] for row in matrix]
 
 
-OUTCOMES = ("plans_first", "plans_retry", "plans_fallback", "plans_unverified", "deadlocks", "deadlock_yields")
+OUTCOMES = ("plans_first", "plans_retry", "plans_fallback", "plans_unverified", "deadlocks", "deadlock_yields",
+            "deadlock_steps_aside")
 """The counters of how a car's replans ended (agent.safe_plan) and of its deadlocks
 (agent.deadlock), as CarAgent counts them."""
 
 
 def plan_outcomes(counters: list[dict[str, int]]) -> dict:
     """RUN keys from each car's counters (in car order): ``plans`` (fleet totals of
-    replans verified first try, on retry, fallbacks, unverified), ``deadlocks`` and
-    ``deadlock_yields`` (totals), and ``outcomes`` per car."""
+    replans verified first try, on retry, fallbacks, unverified), ``deadlocks``,
+    ``deadlock_yields`` and ``deadlock_steps_aside`` (totals), and ``outcomes`` per car."""
     per_car = [{key: int(c.get(key, 0)) for key in OUTCOMES} for c in counters]
     total = {key: sum(car[key] for car in per_car) for key in OUTCOMES}
     return {
         "plans": {key.removeprefix("plans_"): total[key] for key in OUTCOMES if key.startswith("plans_")},
         "deadlocks": total["deadlocks"],
         "deadlock_yields": total["deadlock_yields"],
+        "deadlock_steps_aside": total["deadlock_steps_aside"],
         "outcomes": per_car,
     }

@@ -63,6 +63,23 @@ def test_doorway_standoffs_are_resolved_by_giving_way():
 
 
 @pytest.mark.slow
+def test_a_car_parked_across_the_only_way_steps_aside_and_comes_back():
+    """pocket-2: car 1 parks in the one gap of a wall before car 2 gets there from the far
+    corner of the pocket. Car 1 is at its goal, in no deadlock group; it sees car 2 stalled
+    with no way to its goal but through its spot, steps aside, and returns once car 2 is
+    through. With resolution off car 2 never arrives."""
+    scene = load_scenario(SCENES / "pocket-2.toml")
+    off = dataclasses.replace(scene, deadlock=dataclasses.replace(scene.deadlock, enabled=False))
+    cases = [(scene, seed) for seed in range(100, 104)] + [(off, 100)]
+    with ProcessPoolExecutor(max_workers=min(2, os.cpu_count() or 1)) as pool:
+        runs = [run for run, _ in pool.map(run_one, *zip(*cases))]
+    for run in runs[:-1]:
+        assert all(run["reached_goal"]) and not run["breaches"] and run["obstacle_min_clearance"] > 0.0
+        assert run["deadlock_steps_aside"] >= 1
+    assert runs[-1]["reached_goal"] == [True, False] and runs[-1]["deadlock_steps_aside"] == 0
+
+
+@pytest.mark.slow
 @pytest.mark.parametrize("scene, seed", [("pillar-6", 100), ("corridor-4", 100), ("corridor-4", 101)])
 def test_the_hard_scenes_of_issue_9_run_without_breach_or_contact(scene, seed):
     run, _ = run_one(load_scenario(SCENES / f"{scene}.toml"), seed)
