@@ -208,7 +208,7 @@ function renderCars(cars) {
 
 function outcomes(o) {
   if (!o) return "–";
-  return `${o.first}/${o.retry}/${o.fallback} · ${o.deadlocks}`;
+  return `${o.first}/${o.retry}/${o.fallback} · ${o.deadlocks}/${o.aside ?? 0}`;
 }
 
 // Operator mode (trustfg dashboard --operator): the session's token comes with the page's
