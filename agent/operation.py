@@ -15,6 +15,7 @@ Modes::
 
     waiting / arrived --start(trial T)--> driving       (see take_start for the rules)
     driving --at its goal--> arrived
+    arrived --steps aside for a car it walls in (agent.deadlock)--> driving (the same trial)
     driving --abort (trial T or any) | deadman | release--> waiting
     any --estop--> e_stopped --release--> waiting
 
@@ -165,6 +166,16 @@ class Operation:
         if self.mode == Mode.DRIVING:
             self.mode = Mode.ARRIVED
             self.reason = f"trial {self.trial} ended at the goal: waiting for the next start"
+
+    def step_aside(self, now: float, peer: int) -> bool:
+        """Arrived, the agent steps aside for ``peer``, which it walls in (agent.deadlock):
+        the trial goes on, driving, until the car is back at its goal -- not without the
+        operator's heartbeat (deadman on), never when e-stopped. Whether the mode changed."""
+        if self.mode != Mode.ARRIVED or not self.hears_operator(now):
+            return False
+        self.mode = Mode.DRIVING
+        self.reason = f"trial {self.trial}: stepping aside for car {peer}, which it walls in"
+        return True
 
     def car_reports_latch(self, latched: bool, now: float) -> bool:
         """The car's answer says whether its e-stop is latched; whether the mode changed."""

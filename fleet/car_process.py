@@ -422,7 +422,10 @@ class CarProcess:
         return mode.value
 
     def _replan(self, now: float) -> None:
-        if self.operation.mode != Mode.DRIVING:
+        # Arrived, the agent still watches whether it walls a stalled car in; stepping
+        # aside, the trial goes on (agent.deadlock, agent.operation).
+        parked = self.operation.mode == Mode.ARRIVED and self.arrived
+        if self.operation.mode != Mode.DRIVING and not parked:
             own = self.agent.tracks.get(self.car.id)
             motion = own.motion() if own else None
             if motion is not None:  # show where we stand until we may go
@@ -433,6 +436,11 @@ class CarProcess:
             except Exception:  # keep the last plan; the car keeps tracking it
                 log.exception("car %d: replanning raised", self.car.id)
                 self.counters["replan_errors"] += 1
+            aside = self.agent.deadlock.detour
+            if parked and not self.agent.at_goal and aside is not None and aside.for_peer is not None:
+                with self._operation_lock:
+                    if self.operation.step_aside(now, aside.for_peer):
+                        log.info("car %d: %s", self.car.id, self.operation.reason)
         own = self.agent.tracks.get(self.car.id)
         motion = own.motion() if own else None
         if self.operation.mode == Mode.DRIVING and motion is not None \

@@ -120,6 +120,21 @@ def test_a_latched_car_makes_the_process_e_stopped_but_not_just_after_a_release(
     assert op.car_reports_latch(True, 1.8 + LATCH_REPORT_GRACE_S + 0.01)  # still latched: say so
 
 
+def test_an_arrived_car_steps_aside_in_its_trial_but_not_unheard_or_e_stopped():
+    op = driving(OperatorConfig(deadman_s=2.0), now=10.0)
+    op.arrived()
+    assert op.step_aside(11.5, peer=3) and op.mode == Mode.DRIVING and op.trial == 1
+    assert op.may_drive(11.5) and "car 3" in op.reason
+    assert not op.step_aside(11.6, peer=3)  # driving already
+    op.arrived()
+    assert not op.step_aside(12.5, peer=3) and op.mode == Mode.ARRIVED  # the operator unheard for 2.5 s
+    stopped = driving()
+    stopped.take_stop(stop("estop"), 11.0)
+    assert not stopped.step_aside(11.5, peer=3) and stopped.mode == Mode.E_STOPPED
+    waiting = Operation(CAR, OperatorConfig())
+    assert not waiting.step_aside(0.0, peer=3) and waiting.mode == Mode.WAITING
+
+
 def test_start_timeout_drives_without_the_operator():
     op = Operation(CAR, OperatorConfig())
     op.take_start_without_operator(3.0, 0.3)

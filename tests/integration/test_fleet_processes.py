@@ -1,11 +1,15 @@
 """The whole fleet as OS processes: real Zenoh, real UDP, real NatNet bytes, real GTSAM."""
 
 import json
+from pathlib import Path
 
 import pytest
 
 from trustfg.agent.config import AttackConfig
+from trustfg.agent.scenario_files import load_scenario
 from trustfg.fleet.launch import START_LEAD_S, loopback_fleet, run
+
+SCENES = Path(__file__).resolve().parent.parent / "data" / "scenes"
 
 
 @pytest.fixture(scope="module")
@@ -74,3 +78,14 @@ def test_honest_cars_distrust_a_liar_over_the_network(liar):
         peers = [trust[a][b] for b in honest if b != a]
         assert min(peers) > 0.8, trust[a]
         assert trust[a][liar_index] < min(peers) - 0.1, trust[a]
+
+
+def test_a_car_process_parked_across_the_only_way_steps_aside(tmp_path):
+    """pocket-2 (tests/fleet/test_pipeline.py has it in-process): the car parked in the
+    gap has arrived -- its trial ended -- and still steps aside for the car it walls in,
+    then parks again."""
+    summary = run(loopback_fleet(load_scenario(SCENES / "pocket-2.toml"), None), tmp_path, seed=100)
+    assert summary["crashed"] == [] and summary["breaches"] == []
+    assert all(summary["reached_goal"]), summary["reached_goal"]
+    assert summary["deadlock_steps_aside"] >= 1
+    assert "stepping aside for car 2" in (tmp_path / "car_1.log").read_text()
