@@ -247,18 +247,8 @@ def detour_goal(position: np.ndarray, ways: list[np.ndarray], everyone: list[np.
     position = np.asarray(position, float)
     nearest = [way[int(np.argmin(np.linalg.norm(way - position, axis=1)))] for way in ways]
     away = sum(((position - p) / max(float(np.linalg.norm(position - p)), 1e-6) for p in nearest), np.zeros(2))
-    base = math.atan2(away[1], away[0]) if np.linalg.norm(away) > 1e-6 else 0.0
     avoid = np.vstack([*ways, *everyone]) if ways or everyone else np.zeros((0, 2))
-    for turn in DETOUR_TURNS_DEG:
-        angle = base + math.radians(turn)
-        goal = position + distance * np.array([math.cos(angle), math.sin(angle)])
-        way = position + np.linspace(0.0, 1.0, SEGMENT_SAMPLES)[1:, None] * (goal - position)
-        if np.min(sdf.distance(way)) < wall_clear:
-            continue
-        if len(avoid) and np.min(np.linalg.norm(avoid - goal, axis=1)) < keep_clear:
-            continue
-        return goal
-    return None
+    return _first_clear(position, away, DETOUR_TURNS_DEG, distance, avoid, keep_clear, sdf, wall_clear)
 
 
 def _aside_goal(position: np.ndarray, peer: PeerSeen, parked: list, everyone: list[np.ndarray], distance: float,
@@ -266,17 +256,28 @@ def _aside_goal(position: np.ndarray, peer: PeerSeen, parked: list, everyone: li
     """A point ``distance`` from ``position``, reached along a clear segment and
     ``keep_clear`` off every car seen, from where we no longer wall ``peer`` in (first
     straight away from it, then turning); None if there is none."""
-    away = position - peer.position
-    base = math.atan2(away[1], away[0]) if np.linalg.norm(away) > 1e-6 else 0.0
     others = np.array([p for p in everyone if np.linalg.norm(p - position) > 1e-6]).reshape(-1, 2)
-    for turn in DETOUR_TURNS_DEG + (180.0,):
+    return _first_clear(position, position - peer.position, DETOUR_TURNS_DEG + (180.0,), distance, others,
+                        keep_clear, sdf, wall_clear,
+                        lambda goal: connected(sdf, peer.position, peer.goal, wall_clear,
+                                               [*parked, (tuple(goal), keep_clear)]))
+
+
+def _first_clear(position: np.ndarray, away: np.ndarray, turns: tuple[float, ...], distance: float,
+                 avoid: np.ndarray, keep_clear: float, sdf: SignedDistanceField, wall_clear: float,
+                 accept=lambda goal: True) -> np.ndarray | None:
+    """The first point ``distance`` from ``position``, in the direction ``away`` turned by
+    each of ``turns`` (degrees) in order, whose straight way keeps ``wall_clear`` from the
+    walls, that keeps ``keep_clear`` from every point of ``avoid`` and that ``accept``s."""
+    base = math.atan2(away[1], away[0]) if np.linalg.norm(away) > 1e-6 else 0.0
+    for turn in turns:
         angle = base + math.radians(turn)
         goal = position + distance * np.array([math.cos(angle), math.sin(angle)])
         way = position + np.linspace(0.0, 1.0, SEGMENT_SAMPLES)[1:, None] * (goal - position)
         if np.min(sdf.distance(way)) < wall_clear:
             continue
-        if len(others) and np.min(np.linalg.norm(others - goal, axis=1)) < keep_clear:
+        if len(avoid) and np.min(np.linalg.norm(avoid - goal, axis=1)) < keep_clear:
             continue
-        if connected(sdf, peer.position, peer.goal, wall_clear, [*parked, (tuple(goal), keep_clear)]):
+        if accept(goal):
             return goal
     return None

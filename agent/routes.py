@@ -1,4 +1,4 @@
-"""Routes for generated scenes: a car's via points around the obstacles of a map.
+"""Routes: a car's via points round the obstacles of a map (and round cars that stand).
 
 A scene's route is its lane: the planner seeds its first plan along it and is pulled
 softly towards it (planner.lane_keeping), and the ORCA baseline steers at its next via
@@ -59,8 +59,7 @@ def segment_clear(sdf: SignedDistanceField, a: np.ndarray, b: np.ndarray, thresh
     return bool(np.all(sdf.distance(points) >= threshold))
 
 
-def connected(sdf: SignedDistanceField, a, b, clearance: float,
-              keep_out: list[tuple[tuple[float, float], float]] = ()) -> bool:
+def connected(sdf: SignedDistanceField, a, b, clearance: float, keep_out: Sequence[KeepOut] = ()) -> bool:
     """Whether a centre can move from ``a`` to ``b`` keeping ``clearance`` from every
     obstacle and ``radius`` from every (point, radius) of ``keep_out``: a and b lie in one
     connected region of the free cells of the distance field's own grid."""
