@@ -189,7 +189,7 @@ def tightened(request: PlanRequest, failed: Plan, conflicts: list[Conflict]) -> 
                                epsilon_obstacle=request.epsilon_obstacle + TIGHTEN_PAD * wall)
 
 
-def standing(plan: Plan, since: float) -> bool:
+def stands_still(plan: Plan, since: float) -> bool:
     """Whether ``plan`` moves its car less than STANDING_M from ``since`` on."""
     times = np.linspace(max(since, plan.t0), max(since, plan.t_end), 12)
     positions = plan.position_at(times)
@@ -199,11 +199,11 @@ def standing(plan: Plan, since: float) -> bool:
 def around_standing(request: PlanRequest, conflicts: list[Conflict], sdf: SignedDistanceField) -> PlanRequest | None:
     """The request cold along a route round every standing peer, when one of them is among
     ``conflicts``; None when none is, or no route keeps the clearances."""
-    still = [i for i, peer in enumerate(request.peers) if standing(peer.plan, request.t_now)]
+    still = [i for i, peer in enumerate(request.peers) if stands_still(peer.plan, request.t_now)]
     if not any(c.kind == "peer" and c.peer in still for c in conflicts):
         return None
-    keep_out = [(tuple(np.ravel(request.peers[i].plan.position_at(request.t_now))), request.peers[i].epsilon + AROUND_MARGIN_M)
-                for i in still]
+    keep_out = [(tuple(np.ravel(request.peers[i].plan.position_at(request.t_now))),
+                 request.peers[i].epsilon + AROUND_MARGIN_M) for i in still]
     clearance = request.epsilon_obstacle
     try:
         route = plan_route(sdf, None, request.position, request.goal, clearance, clearance + AROUND_COMFORT_M, keep_out)
