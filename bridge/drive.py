@@ -8,7 +8,12 @@ in-process fleet (fleet.fleet_sim, on simulated time) both command their cars th
    no plan, or does not see itself;
 2. else the tracking command for the plan (bridge.tracking);
 3. capped, when ``guard.enabled``, by the proximity guard (agent.guard) against the
-   other cars it sees and the map's walls ahead of it.
+   other cars it sees and the map's walls ahead of it. A car the guard holds (a cap
+   under HELD_MPS) stands and turns on the spot to where its plan goes. Kanayama's turn
+   rate is the plan's curvature times its speed; applied to a car held still it spun the
+   car, and the turn-first rule turned it back: beside a pillar (random-field-6-a, seed
+   60) a car swung between 165 and 200 degrees, every heading of it into the pillar, for
+   40 s, while its plan went off at 134 degrees, where the way was free.
 """
 
 from __future__ import annotations
@@ -20,7 +25,11 @@ from ..agent.config import Scenario
 from ..agent.gp import Plan
 from ..agent.guard import speed_cap
 from ..agent.world import SignedDistanceField
-from .tracking import track
+from .tracking import STANDSTILL_MPS, track, turn_on_the_spot
+
+HELD_MPS = STANDSTILL_MPS
+"""A guard cap below this holds the car: it stands and turns on the spot to where its plan
+goes (bridge.tracking.turn_on_the_spot), not with the plan's curvature it cannot follow."""
 
 
 @dataclass(frozen=True)
@@ -50,5 +59,8 @@ def drive(plan: Plan | None, t: float, pose: tuple[float, float, float] | None, 
         t_r = scenario.guard.reaction_s if reaction_s is None else reaction_s
         cap = speed_cap(*pose, radius_m, others(), scenario.guard, scenario.safety, sdf, t_r, omega * t_r)
         if v > cap:
+            if cap < HELD_MPS:  # held: stand, and turn to where the plan goes
+                return Command(0.0, turn_on_the_spot(plan, t, *pose, scenario.tracking, scenario.vehicle),
+                               guard_limited=True)
             return Command(cap, omega, guard_limited=True)
     return Command(v, omega)

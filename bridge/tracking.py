@@ -72,3 +72,20 @@ def _clamp(v: float, omega: float, limits: VehicleConfig) -> tuple[float, float]
     v = min(max(v, -limits.max_reverse_mps), limits.max_speed_mps)
     omega = min(max(omega, -limits.max_turn_rate_radps), limits.max_turn_rate_radps)
     return v, omega
+
+
+def turn_on_the_spot(plan: Plan, t: float, x: float, y: float, yaw: float, gains: TrackingConfig,
+                     limits: VehicleConfig) -> float:
+    """The turn rate that points a car standing at (x, y, yaw) where the plan goes at t:
+    along the plan's velocity, or at its reference point while the plan stands still.
+    For a car held still (by the guard, bridge.drive): Kanayama's turn rate assumes the
+    car moves at the reference speed, and held it only spins with the plan's curvature."""
+    (p_ref,), (v_ref,) = plan.state_at(t)
+    if float(np.hypot(v_ref[0], v_ref[1])) >= STANDSTILL_MPS:
+        heading = math.atan2(v_ref[1], v_ref[0])
+    elif math.hypot(p_ref[0] - x, p_ref[1] - y) >= gains.goal_tolerance_m:
+        heading = math.atan2(p_ref[1] - y, p_ref[0] - x)
+    else:
+        return 0.0
+    return _clamp(0.0, gains.k_heading * wrap(heading - yaw), limits)[1]
+

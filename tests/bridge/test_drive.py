@@ -2,12 +2,14 @@
 when it stops, that it tracks the plan, and that the guard caps it when switched on."""
 
 import dataclasses
+import math
 
 import numpy as np
 import pytest
 
 from trustfg.agent.config import Scenario
 from trustfg.agent.gp import Plan
+from trustfg.agent.vehicle import VehicleState, step
 from trustfg.bridge.drive import STOP, drive
 
 
@@ -41,3 +43,50 @@ def test_the_guard_caps_the_speed_before_a_car_ahead_and_only_when_on(scenario):
     asked = []
     free = drive(moving(), 1.0, (0.5, 0.0, 0.0), True, lambda: asked.append(1) or [], 0.1, off, None)
     assert free.v == pytest.approx(0.5) and not asked  # off: the others are not even looked at
+
+
+def arc(x: float, y: float, t0: float, heading: float, turn_radps: float, speed: float = 0.5) -> Plan:
+    """A plan from (x, y) at t0 setting off at ``heading`` and curving at ``turn_radps``."""
+    times = np.arange(0.0, 2.0 + 1e-9, 0.1)
+    theta = heading + turn_radps * times
+    velocities = speed * np.stack([np.cos(theta), np.sin(theta)], axis=1)
+    positions = np.array([x, y]) + np.concatenate([[[0.0, 0.0]], np.cumsum(velocities[:-1] * 0.1, axis=0)])
+    return Plan(t0, 0.1, positions, velocities)
+
+
+def held_at_a_wall(scenario, sdf, seconds: float = 6.0) -> tuple[float, float]:
+    """A car hugging the street's west wall (x = -0.8), 4 mm inside the guard's keep-off
+    line and facing 10 degrees into the wall, on a plan re-made from where it is every
+    0.2 s (as a replanning car's is) that sets off north-east, away from the wall, and
+    curves left. Returns (how far it got, how much nearer the wall its edge came than at
+    the start)."""
+    radius = 0.1
+    keep = radius + scenario.guard.wall_clearance_m
+    car = VehicleState(-0.8 + keep - 0.004, -1.5, math.radians(100.0))
+    start = np.array([car.x, car.y])
+    clearance = float(sdf.distance(start))
+    least, plan, dt = clearance, None, 0.02
+    for k in range(int(seconds / dt)):
+        t = k * dt
+        if k % 10 == 0:
+            plan = arc(car.x, car.y, t, math.radians(45.0), 3.0)
+        command = drive(plan, t, (car.x, car.y, car.yaw), True, lambda: [], radius, scenario, sdf)
+        car = step(car, command.v, command.omega, dt, scenario.vehicle)
+        least = min(least, float(sdf.distance(np.array([car.x, car.y]))))
+    return float(np.linalg.norm(np.array([car.x, car.y]) - start)), clearance - least
+
+
+def test_a_car_the_guard_holds_turns_to_where_its_plan_goes_and_gets_away(scenario, intersection_sdf):
+    # Held, Kanayama's turn (the plan's curvature times its speed) spun the car further into
+    # the wall and the turn-first rule turned it back: it swung between headings that all
+    # point into the wall, and never moved (random-field-6-a seed 60: 40 s beside a pillar).
+    moved, nearer = held_at_a_wall(scenario, intersection_sdf)
+    assert moved > 1.0
+    assert nearer <= 0.002  # and never into the wall
+
+
+def test_held_with_the_plan_curvature_the_car_stays_stuck(scenario, intersection_sdf, monkeypatch):
+    import trustfg.bridge.drive as drive_module
+    monkeypatch.setattr(drive_module, "HELD_MPS", -1.0)  # the rule off: cap and Kanayama's turn
+    moved, _ = held_at_a_wall(scenario, intersection_sdf)
+    assert moved < 0.05
