@@ -8,12 +8,24 @@ agent. The owner drains the queue in its own loop and decodes there (agent.messa
 The sender id is taken from the key, so the decoder can refuse a message whose ``id``
 disagrees with it. ``close()`` undeclares everything and closes the session; nothing in
 here blocks on a Zenoh channel, so shutdown never hangs.
+
+A subscription Zenoh lost is declared again. Four peers opening their sessions to each
+other at once sometimes end with one of them never getting one kind from one other,
+though it hears that car's other kinds (this machine, Zenoh 1.10, a script of bare
+sessions under load: 4 of 76 starts with every peer dialling every other, 1 of 76 with
+only the higher id dialling; in CI a car drove a whole run without one peer's plans).
+So ``drain()`` also watches (:func:`silent_kinds`): a car whose liveliness token is up
+and that was heard on some kind within ``HEARD_S``, but not on kind K for ``SILENT_S``,
+has K subscribed again, at most every ``RESUBSCRIBE_EVERY_S`` (counted:
+``resubscribed_<kind>``). A car that only stopped publishing K costs a redeclaration
+every few seconds, no more.
 """
 
 from __future__ import annotations
 
 import json
 import logging
+import math
 import re
 import threading
 import time
@@ -32,6 +44,29 @@ from .keys import ALIVE, CLOCK, HEARTBEAT, KINDS, OPERATOR, START, STOP, every_c
 log = logging.getLogger(__name__)
 
 CLOSE_TIMEOUT_S = 2.0
+WATCH_PERIOD_S = 0.5
+SILENT_S = 3.0
+"""With the control defaults a car publishes every kind at least every 0.5 s (status and
+trust 0.5 s, plans 0.1 s, poses 0.05 s): three seconds without one is a lost subscription,
+not a gap (a lab that sets slower periods pays a needless redeclaration now and then)."""
+HEARD_S = 1.0
+RESUBSCRIBE_EVERY_S = 5.0
+
+
+def silent_kinds(heard: dict[tuple[int, str], float], alive: dict[int, bool], kinds: tuple[str, ...],
+                 now: float, opened: float) -> dict[str, list[int]]:
+    """Per kind, the live cars heard on another kind within HEARD_S but not on this one
+    for SILENT_S (nor since ``opened``, the session's opening, if never heard)."""
+    out: dict[str, list[int]] = {}
+    if now - opened < SILENT_S:
+        return out
+    for car, up in alive.items():
+        if not up or max((heard.get((car, k), -math.inf) for k in kinds), default=-math.inf) < now - HEARD_S:
+            continue
+        for kind in kinds:
+            if now - max(heard.get((car, kind), -math.inf), opened) > SILENT_S:
+                out.setdefault(kind, []).append(car)
+    return out
 
 
 class BusError(RuntimeError):
@@ -142,6 +177,12 @@ class FleetBus:
         self._publishers: dict[str, object] = {}
         self._reliable_plan = None
         self._entities: list = []
+        self._subscribers: dict[str, object] = {}
+        """The car kinds' subscribers, by kind (declared again when one goes silent)."""
+        self._heard: dict[tuple[int, str], float] = {}
+        self._opened = math.inf
+        self._next_watch = 0.0
+        self._resubscribed: dict[str, float] = {}
 
     # --- lifecycle -------------------------------------------------------------------------
 
@@ -200,15 +241,8 @@ class FleetBus:
             self._publishers[HEARTBEAT] = session.declare_publisher(
                 fleet_key(fleet, HEARTBEAT), congestion_control=zenoh.CongestionControl.DROP)
         for kind in self.kinds:
-            pattern = every_car(fleet, kind)
-            if kind == "plan":
-                subscriber = zext.declare_advanced_subscriber(
-                    session, pattern, self._on_sample,
-                    history=zext.HistoryConfig(detect_late_publishers=True, max_samples=1),
-                    recovery=zext.RecoveryConfig(heartbeat=True), subscriber_detection=True)
-            else:
-                subscriber = session.declare_subscriber(pattern, self._on_sample)
-            self._entities.append(subscriber)
+            self._subscribers[kind] = self._subscribe(kind)
+        self._opened = self.clock()
         for name in self.operator_kinds:
             if name == HEARTBEAT:
                 self._entities.append(session.declare_subscriber(fleet_key(fleet, name), self._on_sample))
@@ -219,6 +253,40 @@ class FleetBus:
         self._entities.append(session.liveliness().declare_subscriber(
             every_car(fleet, ALIVE), self._on_liveliness, history=True))
 
+    def _subscribe(self, kind: str):
+        pattern = every_car(self.fleet, kind)
+        if kind == "plan":
+            return zext.declare_advanced_subscriber(
+                self._session, pattern, self._on_sample,
+                history=zext.HistoryConfig(detect_late_publishers=True, max_samples=1),
+                recovery=zext.RecoveryConfig(heartbeat=True), subscriber_detection=True)
+        return self._session.declare_subscriber(pattern, self._on_sample)
+
+    def _watch(self, now: float) -> None:
+        """Declare again the subscription of a kind a live car is not heard on (see above)."""
+        if now < self._next_watch or self._session is None:
+            return
+        self._next_watch = now + WATCH_PERIOD_S
+        with self._lock:
+            heard = dict(self._heard)
+        own = {} if self.car_id is None else {self.car_id: False}
+        for kind, cars in silent_kinds(heard, self.alive | own, self.kinds, now, self._opened).items():
+            if now - self._resubscribed.get(kind, -math.inf) < RESUBSCRIBE_EVERY_S:
+                continue
+            self._resubscribed[kind] = now
+            log.warning("%s: no %s from car%s %s for %.0f s, though heard otherwise: subscribing to %s again",
+                        f"car {self.car_id}" if self.car_id else "observer", kind, "s" if len(cars) > 1 else "",
+                        ", ".join(map(str, cars)), SILENT_S, kind)
+            try:
+                self._subscribers[kind].undeclare()
+            except Exception as exc:  # already gone: declare anew all the same
+                log.debug("undeclare %s: %s", kind, exc)
+            try:
+                self._subscribers[kind] = self._subscribe(kind)
+                self.counters[f"resubscribed_{kind}"] += 1
+            except Exception as exc:  # a closing session: nothing to watch any more
+                log.warning("subscribing to %s again failed: %s", kind, exc)
+
     def close(self, timeout_s: float = CLOSE_TIMEOUT_S) -> None:
         """Undeclare everything and close the session, giving up after ``timeout_s``:
         on a lossy network Zenoh may wait long for its peers, and a stopping car process
@@ -226,8 +294,9 @@ class FleetBus:
         session, self._session = self._session, None
         if session is None:
             return
-        entities = [*self._entities, *self._publishers.values(),
+        entities = [*self._subscribers.values(), *self._entities, *self._publishers.values(),
                     *([self._reliable_plan] if self._reliable_plan is not None else [])]
+        self._subscribers.clear()
         self._entities.clear()
         self._publishers.clear()
         self._reliable_plan = None
@@ -290,6 +359,7 @@ class FleetBus:
                 self._queue.popleft()
                 self.counters["dropped_queue_full"] += 1
             self._queue.append(item)
+            self._heard[(sender, kind)] = item.at
             self.counters[f"received_{kind}"] += 1
         self._arrived.set()
 
@@ -336,7 +406,9 @@ class FleetBus:
         return arrived or bool(self._queue)
 
     def drain(self, limit: int | None = None) -> list[Received]:
-        """Everything received since the last drain (oldest first)."""
+        """Everything received since the last drain (oldest first); and, every
+        WATCH_PERIOD_S, a subscription lost to Zenoh declared again (see above)."""
+        self._watch(self.clock())
         with self._lock:
             if limit is None or limit >= len(self._queue):
                 items = list(self._queue)
