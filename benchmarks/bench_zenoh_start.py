@@ -1,0 +1,124 @@
+"""How often Zenoh peers that open their sessions at once lose a subscription.
+
+    python benchmarks/bench_zenoh_start.py [--starts 50] [--peers 4] [--dial all|lower] [--watch]
+
+Bare Zenoh sessions, no trustfg code on the wire: each start opens ``--peers`` peer-mode
+sessions in their own OS processes on loopback (a TCP and a UDP ``?rel=0`` endpoint each,
+multicast scouting off), every peer dialling every other (``--dial lower``: only the higher
+id dials). Each subscribes to every peer's ``plan`` (an advanced subscriber with history and
+recovery, as fleet.bus does) and ``status`` (plain), and for ``--seconds`` publishes a
+plan-sized sample on both plan paths and a status every 0.1 s. A start is *lost* when some
+peer heard nothing of some kind of some other peer in the last second.
+
+``--watch`` adds fleet.bus's rule (a kind silent for SILENT_S from a peer heard otherwise
+is subscribed again). Load the cores (e.g. two busy loops) to see it more often: on 2
+cores under load, Zenoh 1.10.2 lost a subscription in 4 of 76 starts dialling all, 1 of 76
+dialling lower; with a watch like this one (silence of 1 s there), 0 of 19.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing as mp
+import socket
+import time
+
+import zenoh
+import zenoh.ext as zext
+
+from trustfg.fleet.bus import HEARD_S, SILENT_S
+
+KINDS = ("plan", "status")
+
+
+def free_port(kind: int = socket.SOCK_STREAM) -> int:
+    with socket.socket(socket.AF_INET, kind) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def config(listen: tuple[str, ...], connect: tuple[str, ...]) -> zenoh.Config:
+    c = zenoh.Config()
+    for path, value in (("mode", "peer"), ("scouting/multicast/enabled", False), ("scouting/delay", 0),
+                        ("transport/unicast/max_links", 4), ("listen/endpoints", list(listen)),
+                        ("connect/endpoints", [e for e in connect if e not in listen])):
+        c.insert_json5(path, json.dumps(value))
+    return c
+
+
+def peer(me: int, peers: int, listen, connect, prefix: str, seconds: float, watch: bool, out) -> None:
+    session = zenoh.open(config(listen, connect))
+    heard: dict[tuple[int, str], float] = {}
+
+    def on_sample(sample: zenoh.Sample) -> None:
+        parts = str(sample.key_expr).split("/")
+        heard[(int(parts[1]), parts[2])] = time.monotonic()
+
+    def subscribe(kind: str):
+        if kind == "plan":
+            return zext.declare_advanced_subscriber(
+                session, f"{prefix}/*/plan", on_sample, history=zext.HistoryConfig(detect_late_publishers=True, max_samples=1),
+                recovery=zext.RecoveryConfig(heartbeat=True), subscriber_detection=True)
+        return session.declare_subscriber(f"{prefix}/*/status", on_sample)
+
+    subscribers = {kind: subscribe(kind) for kind in KINDS}
+    best_effort = session.declare_publisher(f"{prefix}/{me}/plan", reliability=zenoh.Reliability.BEST_EFFORT,
+                                            express=True, congestion_control=zenoh.CongestionControl.DROP)
+    reliable = zext.declare_advanced_publisher(
+        session, f"{prefix}/{me}/plan", cache=zext.CacheConfig(max_samples=1), publisher_detection=True,
+        sample_miss_detection=zext.MissDetectionConfig(heartbeat=0.5), reliability=zenoh.Reliability.RELIABLE,
+        congestion_control=zenoh.CongestionControl.DROP)
+    status = session.declare_publisher(f"{prefix}/{me}/status", reliability=zenoh.Reliability.BEST_EFFORT)
+    payload, started, resubscribed = b"p" * 700, time.monotonic(), 0
+    while (now := time.monotonic()) - started < seconds:
+        best_effort.put(payload)
+        reliable.put(payload)
+        status.put(b"s")
+        if watch and now - started > SILENT_S:
+            for kind in KINDS:
+                others = [j for j in range(1, peers + 1) if j != me
+                          and max(heard.get((j, k), 0.0) for k in KINDS) > now - HEARD_S]
+                if any(now - heard.get((j, kind), started) > SILENT_S for j in others):
+                    subscribers[kind].undeclare()
+                    subscribers[kind] = subscribe(kind)
+                    resubscribed += 1
+        time.sleep(0.1)
+    end = time.monotonic()
+    lost = [(j, kind) for j in range(1, peers + 1) if j != me for kind in KINDS if heard.get((j, kind), 0.0) < end - 1.0]
+    session.close()
+    out.put((me, lost, resubscribed))
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--starts", type=int, default=50)
+    parser.add_argument("--peers", type=int, default=4)
+    parser.add_argument("--seconds", type=float, default=6.0)
+    parser.add_argument("--dial", choices=("all", "lower"), default="all")
+    parser.add_argument("--watch", action="store_true", help="subscribe again to a kind gone silent (fleet.bus's rule)")
+    args = parser.parse_args()
+    lost_starts = 0
+    for start in range(args.starts):
+        endpoints = {i: (f"tcp/127.0.0.1:{free_port()}", f"udp/127.0.0.1:{free_port(socket.SOCK_DGRAM)}?rel=0")
+                     for i in range(1, args.peers + 1)}
+        out = mp.Queue()
+        processes = []
+        for i in range(1, args.peers + 1):
+            dial = [e for j, pair in endpoints.items() if args.dial == "all" or j < i for e in pair]
+            process = mp.Process(target=peer, args=(i, args.peers, endpoints[i], tuple(dial), f"race{start}",
+                                                    args.seconds, args.watch, out))
+            process.start()
+            processes.append(process)
+        results = [out.get(timeout=60 + args.seconds) for _ in processes]
+        for process in processes:
+            process.join()
+        lost = [(me, j, kind) for me, pairs, _ in results for j, kind in pairs]
+        lost_starts += bool(lost)
+        print(f"start {start}: {'LOST ' + str(lost) if lost else 'ok'}, resubscribed {sum(r for *_, r in results)}",
+              flush=True)
+    print(f"{lost_starts} of {args.starts} starts lost a subscription (dial {args.dial}, watch {args.watch})")
+
+
+if __name__ == "__main__":
+    main()
