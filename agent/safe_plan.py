@@ -23,6 +23,11 @@ plans have been tried, or (in the car process) ``budget_ms`` of CPU time has gon
                 parked beside a doorway (a bank run had a car that gave way stand 20 s
                 0.6 m from a parked car, every replan failing against it). The arrival
                 slips by the route's extra length.
+    retimed     the failed plan's path at a pace the car can drive from the speed it has
+                (agent.retime): no optimisation, for a plan that broke only the vehicle's
+                limits -- from a standstill the soft start prior lets every plan set off
+                faster than the car accelerates, and a car that had given way stood on
+                its fallback for good (bottleneck-4 seeds 28, 37).
     slower      a later arrival (the horizon half as long again), cold: the car lets the
                 others through first; with the lingering paces of the cold start this
                 includes waiting in place.
@@ -32,7 +37,7 @@ plans have been tried, or (in the car process) ``budget_ms`` of CPU time has gon
                 off its lane for 45 s, every replan a fallback).
     cold        the planner's cold start (the route at several paces, the cheapest first).
 
-A plan that breaks only the vehicle's limits tries ``slower``, then ``off lane``, first;
+A plan that breaks only the vehicle's limits tries ``retimed``, ``slower``, then ``off lane``, first;
 ``around`` is tried only where it applies (else the next one is).
 
 When nothing verifies, the car commits to the fallback (agent.fallback): a braking
@@ -59,6 +64,7 @@ from .config import PlannerConfig, VerifyConfig
 from .fallback import fallback
 from .gp import Plan
 from .planner import PeerConstraint, PlanningError, PlanRequest, PlanResult, plan_trajectory
+from .retime import retime
 from .routes import NoRoute, path_length, plan_route
 from .verify import Bounds, Conflict, Verdict, verify
 from .world import SignedDistanceField
@@ -123,7 +129,10 @@ def plan_safely(request: PlanRequest, bounds: Bounds, planner: PlannerConfig, co
     while attempt is not None:
         tried.append(name)
         try:
-            result = plan_trajectory(attempt, planner if len(tried) == 1 else retry_planner, sdf)
+            if name == "retimed":  # a guess to check as it is, not to optimise (it would undo the pace)
+                result = PlanResult(attempt.warm_start, 0, math.nan, math.nan, 0.0, True)
+            else:
+                result = plan_trajectory(attempt, planner if len(tried) == 1 else retry_planner, sdf)
         except PlanningError:
             result = None
         if result is not None:
@@ -138,7 +147,7 @@ def plan_safely(request: PlanRequest, bounds: Bounds, planner: PlannerConfig, co
             verdict = None
         if len(tried) >= config.max_attempts or (clock and (clock() - budget_start) * 1e3 > config.budget_ms):
             break
-        name, attempt = _next_attempt(request, tried, last, verdict, sdf)
+        name, attempt = _next_attempt(request, tried, last, verdict, sdf, bounds)
     plan, verdict = fallback(last_verified, request, bounds, sdf, config)
     base = last or PlanResult(plan, 0, math.nan, math.nan, 0.0, request.warm_start is not None)
     return Outcome(plan, FALLBACK, _timed(dataclasses.replace(base, plan=plan), started), verdict, tuple(tried),
@@ -150,15 +159,20 @@ def _timed(result: PlanResult, started: float) -> PlanResult:
 
 
 def _next_attempt(request: PlanRequest, tried: list[str], failed: PlanResult | None,
-                  verdict: Verdict | None, sdf: SignedDistanceField) -> tuple[str, PlanRequest | None]:
+                  verdict: Verdict | None, sdf: SignedDistanceField, bounds: Bounds) -> tuple[str, PlanRequest | None]:
     """The next starting guess not tried yet, cheapest first (None: none left)."""
     conflicts = verdict.conflicts if verdict else ()
     distance = [c for c in conflicts if c.kind != "limits"]
     limits_only = bool(conflicts) and not distance
-    order = ["slower", "off lane", "cold"] if limits_only else ["tighten", "around", "other side", "slower", "cold"]
+    order = (["retimed", "slower", "off lane", "cold"] if limits_only
+             else ["tighten", "around", "other side", "slower", "cold"])
     for name in order:
         if name in tried:
             continue
+        if name == "retimed" and failed is not None:
+            speed = float(np.linalg.norm(request.velocity))
+            return name, dataclasses.replace(request, warm_start=retime(failed.plan, speed, bounds.max_speed_mps,
+                                                                        bounds.max_accel_mps2))
         if name == "tighten" and failed is not None and distance:
             return name, tightened(request, failed.plan, distance)
         if name == "around" and distance:
