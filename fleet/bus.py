@@ -267,10 +267,11 @@ class FleetBus:
         if now < self._next_watch or self._session is None:
             return
         self._next_watch = now + WATCH_PERIOD_S
-        with self._lock:
-            heard = dict(self._heard)
-        own = {} if self.car_id is None else {self.car_id: False}
-        for kind, cars in silent_kinds(heard, self.alive | own, self.kinds, now, self._opened).items():
+        with self._lock:  # the callbacks' threads write both
+            heard, alive = dict(self._heard), dict(self.alive)
+        if self.car_id is not None:
+            alive[self.car_id] = False  # never watch ourselves
+        for kind, cars in silent_kinds(heard, alive, self.kinds, now, self._opened).items():
             if now - self._resubscribed.get(kind, -math.inf) < RESUBSCRIBE_EVERY_S:
                 continue
             self._resubscribed[kind] = now
@@ -396,7 +397,8 @@ class FleetBus:
         if parsed is None or parsed[1] != ALIVE:
             return
         up = sample.kind == zenoh.SampleKind.PUT
-        self.alive[parsed[0]] = up
+        with self._lock:
+            self.alive[parsed[0]] = up
         self.counters["liveliness_up" if up else "liveliness_down"] += 1
 
     def wait(self, timeout: float) -> bool:
