@@ -24,6 +24,7 @@ and keeping ``clearance`` in d' keeps r_k from every c_k.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -45,6 +46,9 @@ SEGMENT_STEP_M = 0.02
 """Spacing of the distance checks along a straight segment, m."""
 COMFORT_MARGIN_M = 0.15
 """A scene's routes keep eps_obs + this from obstacles where they can."""
+SNAP_M = 0.1
+"""How far a point inside a clearance may be from a free cell and still count as in its
+region (connected): a car stopped that little inside can step out."""
 
 
 class NoRoute(ValueError):
@@ -62,7 +66,9 @@ def segment_clear(sdf: SignedDistanceField, a: np.ndarray, b: np.ndarray, thresh
 def connected(sdf: SignedDistanceField, a, b, clearance: float, keep_out: Sequence[KeepOut] = ()) -> bool:
     """Whether a centre can move from ``a`` to ``b`` keeping ``clearance`` from every
     obstacle and ``radius`` from every (point, radius) of ``keep_out``: a and b lie in one
-    connected region of the free cells of the distance field's own grid."""
+    connected region of the free cells of the distance field's own grid. A point a little
+    inside a clearance (a car that stopped 2 cm nearer a wall than eps_obs) counts as in
+    the region of the nearest free cell within SNAP_M: it can step out of it."""
     ny, nx = sdf.values.shape
     free = sdf.values >= clearance
     xs = sdf.origin[0] + np.arange(nx) * sdf.cell_m
@@ -70,11 +76,21 @@ def connected(sdf: SignedDistanceField, a, b, clearance: float, keep_out: Sequen
     for (px, py), radius in keep_out:
         free &= (xs[None, :] - px) ** 2 + (ys[:, None] - py) ** 2 >= radius * radius
     regions, _ = ndimage.label(free)
+    reach = int(math.ceil(SNAP_M / sdf.cell_m))
 
     def region(p) -> int:
         ix = int(np.clip(round((p[0] - sdf.origin[0]) / sdf.cell_m), 0, nx - 1))
         iy = int(np.clip(round((p[1] - sdf.origin[1]) / sdf.cell_m), 0, ny - 1))
-        return int(regions[iy, ix])
+        if regions[iy, ix]:
+            return int(regions[iy, ix])
+        y0, x0 = max(iy - reach, 0), max(ix - reach, 0)
+        window = regions[y0:iy + reach + 1, x0:ix + reach + 1]
+        cells = np.argwhere(window > 0)
+        if cells.size == 0:
+            return 0
+        gap = np.hypot(cells[:, 0] + y0 - iy, cells[:, 1] + x0 - ix) * sdf.cell_m
+        nearest = int(np.argmin(gap))
+        return int(window[tuple(cells[nearest])]) if gap[nearest] <= SNAP_M else 0
     return region(a) != 0 and region(a) == region(b)
 
 

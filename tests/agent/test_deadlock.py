@@ -157,3 +157,24 @@ def test_a_step_aside_holds_while_the_peer_is_walled_in_and_ends_once_it_is_thro
     next(a for a in parked_for(stuck_for_good, CONFIG.window_s + 1.0, pocket) if a is not None)
     end = stuck_for_good.detour.latest
     assert stuck_for_good.goal(end + 0.01, aside, PARKED_IN_GAP, here, True, KEEP_CLEAR, pocket, WALL_CLEAR) is None
+
+
+def test_a_peer_stopped_a_little_inside_the_wall_clearance_is_walled_in_all_the_same(pocket, monkeypatch):
+    """A held-out field (random-field-6-s2112039423, seed 6): the stalled car had stopped
+    1.5 cm nearer a pillar than eps_obs, so no way led from its own cell with the parked car
+    or without it, and the parked car never stepped aside. Its region is the nearest free
+    cell's (routes.SNAP_M)."""
+    inside = PeerSeen(np.array([-0.7, -0.05 - WALL_CLEAR + 0.015]), goal=WALLED_IN.goal)
+    assert float(pocket.distance(inside.position)) < WALL_CLEAR
+    assert connected(pocket, inside.position, inside.goal, WALL_CLEAR, [])
+    watch = DeadlockWatch(1, CONFIG)
+    assert any(a is not None for a in parked_for(watch, CONFIG.window_s + 1.0, pocket, peer=inside))
+    import trustfg.agent.routes as routes
+    monkeypatch.setattr(routes, "SNAP_M", 0.0)  # a point's own cell only, as before
+    assert not connected(pocket, inside.position, inside.goal, WALL_CLEAR, [])
+    watch = DeadlockWatch(1, CONFIG)
+    assert all(a is None for a in parked_for(watch, CONFIG.window_s + 1.0, pocket, peer=inside))
+
+
+def test_a_point_deep_in_a_wall_is_in_no_region(pocket):
+    assert not connected(pocket, (-0.7, 0.0), WALLED_IN.goal, WALL_CLEAR, [])  # the wall's middle: 0.3 m from free
