@@ -38,7 +38,8 @@ def retime(plan: Plan, speed_now: float, max_speed: float, max_accel: float) -> 
     """``plan``'s path from its start, driven from ``speed_now`` within the limits."""
     fine = np.linspace(plan.t0, plan.t_end, (plan.n - 1) * SAMPLES_PER_INTERVAL + 1)
     points, velocities = plan.state_at(fine)
-    ds = np.linalg.norm(np.diff(points, axis=0), axis=1)
+    along = np.diff(points, axis=0)
+    ds = np.linalg.norm(along, axis=1)
     a = ACCEL_SHARE * max_accel
     u = np.minimum(np.linalg.norm(velocities, axis=1), max_speed)
     u[0] = min(max(speed_now, 0.0), max_speed)
@@ -55,7 +56,7 @@ def retime(plan: Plan, speed_now: float, max_speed: float, max_accel: float) -> 
     times = plan.times()
     position = np.column_stack([np.interp(times, arrive, points[:, i]) for i in range(2)])
     k = np.clip(np.searchsorted(arrive, times, side="right") - 1, 0, len(step) - 1)
-    heading = np.diff(points, axis=0)[k] / np.maximum(ds[k], 1e-9)[:, None]
+    heading = along[k] / np.maximum(ds[k], 1e-9)[:, None]
     pace = np.where(step > 0.0, ds / np.maximum(step, 1e-9), 0.0)  # each step's mean speed
     middle = 0.5 * (arrive[:-1] + arrive[1:])
     speed = np.interp(times, np.concatenate([[arrive[0]], middle]), np.concatenate([[u[0]], pace]))
