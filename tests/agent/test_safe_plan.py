@@ -136,6 +136,21 @@ def test_the_fallback_keeps_a_verified_plan_while_it_is_clear_and_brakes_short_o
     assert plan.positions[-1][0] > p[0] + 0.1  # it went on as far as it safely could
 
 
+@pytest.mark.parametrize("speed", [0.025, 0.05, 0.1])
+def test_a_car_creeping_off_its_plan_gets_a_fallback_that_comes_to_rest(room, speed):
+    """bottleneck-4 seed 4: a car 2.4 cm/s off its verified plan's timing got, at every
+    replan, a cruise at that speed along its path, kept as if it stopped (a plan reads
+    zero speed after its end), and crept on for good. The fallback's last state rests."""
+    verified = straight((-2.0, 0.0), (2.0, 0.0))
+    t_now = 5.0  # the plan is at its fastest here; the car, held back, creeps on its path
+    (p,), _ = verified.state_at(t_now)
+    request = PlanRequest(t_now, p, np.array([speed, 0.0]), np.array([2.0, 0.0]), 10.0, SAFETY.epsilon_obstacle(R))
+    plan, verdict = fallback(verified, request, bounds(0), room, CONFIG)
+    assert verdict.ok
+    assert np.linalg.norm(plan.velocities[-1]) < 1e-6
+    assert plan.positions[-1][0] > p[0]  # it still goes on as far as it safely can
+
+
 def test_a_car_without_a_verified_plan_that_stands_keeps_standing(room):
     request = PlanRequest(0.0, np.array([0.5, 0.5]), np.zeros(2), np.array([2.0, 0.0]), 10.0,
                           SAFETY.epsilon_obstacle(R))
