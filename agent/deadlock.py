@@ -30,8 +30,10 @@ deadlock (``deadlocks``), each detour one yield (``deadlock_yields``).
 A car parked at its goal is no member of any group, and it can wall a car in for good: a
 car that gave way into the corner beside a door, and a peer parks at its goal between
 that corner and the door (bottleneck-4: 13 of 50 bank runs, every one this way). So a
-parked car steps aside (``step_aside``) when a peer that is stalled, not at its goal,
-has no way to its goal -- no connected free space keeping the wall's epsilon from walls
+parked car steps aside (``step_aside``) when a peer that is stuck -- stalled, or
+halting: every plan it sent over the window ends at a standstill short of its goal, as
+a car creeping on its fallback's brake does (bottleneck-4 seed 4: 2.5 cm/s, more
+progress than ``progress_m``, and every plan refused) -- not at its goal, has no way to its goal -- no connected free space keeping the wall's epsilon from walls
 and eps_0 from every parked car (agent.routes.connected) -- while it would have one
 were we not where we stand. It drives ``detour_m`` to the first side (straight away from
 the walled-in car, then turning by DETOUR_TURNS_DEG) from where the way is open, holds
@@ -62,6 +64,8 @@ SEEN_S = 0.5
 WAITING_S = 0.05
 """A peer whose latest plan starts this much after it was sent has not departed yet."""
 WAY_SAMPLES = 20
+HALT_MPS = 0.02
+"""A plan whose last support state is slower than this ends at a standstill."""
 ASIDE_MAX_YIELDS = 4
 """A step aside ends after at most this many ``yield_s``, walled-in peer or not."""
 
@@ -79,6 +83,8 @@ class PeerSeen:
     way: np.ndarray | None = None
     """Points (k, 2) of where it means to go (its plan, its goal); a car that gives way to
     it moves away from the nearest of them."""
+    halting: bool = False
+    """Its plan ends at a standstill short of its goal: it found no way on."""
 
 
 @dataclass
@@ -150,7 +156,7 @@ class DeadlockWatch:
             return None
         position = np.asarray(position, float)
         for cid, peer in sorted(peers.items()):
-            if peer.at_goal or peer.waiting or peer.goal is None or not self.stalled(cid, now):
+            if peer.at_goal or peer.waiting or peer.goal is None or not self.stuck(cid, now):
                 continue
             parked = [(tuple(p.position), keep_clear) for other, p in peers.items() if other != cid and p.at_goal]
             if connected(sdf, peer.position, peer.goal, wall_clear, [*parked, (tuple(position), keep_clear)]):
@@ -181,8 +187,8 @@ class DeadlockWatch:
         return not connected(sdf, peer.position, peer.goal, wall_clear, [*parked, (tuple(detour.home), keep_clear)])
 
     def _record(self, now: float, position: np.ndarray, goal: np.ndarray, peers: dict[int, PeerSeen]) -> None:
-        self.history.append((now, {self.car_id: (np.asarray(position, float), np.asarray(goal, float))}
-                             | {cid: (p.position, p.goal) for cid, p in peers.items()}))
+        self.history.append((now, {self.car_id: (np.asarray(position, float), np.asarray(goal, float), False)}
+                             | {cid: (p.position, p.goal, p.halting) for cid, p in peers.items()}))
         while self.history and self.history[0][0] < now - self.config.window_s - 1e-9:
             self.history.popleft()
 
@@ -207,11 +213,20 @@ class DeadlockWatch:
         track = [seen.get(car_id) for _, seen in self.history]
         if any(entry is None for entry in track):
             return False
-        (first, goal), (latest, latest_goal) = track[0], track[-1]
+        (first, goal, _), (latest, latest_goal, _) = track[0], track[-1]
         if goal is not None and latest_goal is not None and np.array_equal(goal, latest_goal):
             progress = float(np.linalg.norm(first - goal) - np.linalg.norm(latest - goal))
             return progress < self.config.progress_m
-        return max(float(np.linalg.norm(p - latest)) for p, _ in track) < self.config.progress_m
+        return max(float(np.linalg.norm(p - latest)) for p, _, _ in track) < self.config.progress_m
+
+    def stuck(self, car_id: int, now: float) -> bool:
+        """Stalled, or halting (its plans ending short of its goal) at every sample of a
+        whole window."""
+        if self.stalled(car_id, now):
+            return True
+        if not self.history or self.history[0][0] > now - self.config.window_s + 0.25:
+            return False
+        return all(seen.get(car_id, (None, None, False))[2] for _, seen in self.history)
 
 
 def peers_seen(tracks: dict, views: dict, own_id: int, now: float, arrival_radius_m: float) -> dict[int, PeerSeen]:
@@ -226,11 +241,14 @@ def peers_seen(tracks: dict, views: dict, own_id: int, now: float, arrival_radiu
         goal = None if view is None or view.goal is None else np.asarray(view.goal, float)
         at_goal = goal is not None and float(np.linalg.norm(motion.position - goal)) <= arrival_radius_m
         waiting = bool(view and view.latest is not None and view.latest.plan.t0 > view.latest.stamp + WAITING_S)
-        way = None
+        way, halting = None, False
         if view is not None and view.accepted is not None:
-            way = view.accepted.position_at(np.linspace(now, max(now, view.accepted.t_end), WAY_SAMPLES))
+            plan = view.accepted
+            way = plan.position_at(np.linspace(now, max(now, plan.t_end), WAY_SAMPLES))
             way = way if goal is None else np.vstack([way, goal])
-        seen[car_id] = PeerSeen(motion.position, at_goal, waiting, goal, way)
+            halting = (goal is not None and plan.n > 0 and float(np.linalg.norm(plan.velocities[-1])) < HALT_MPS
+                       and float(np.linalg.norm(plan.positions[-1] - goal)) > arrival_radius_m)
+        seen[car_id] = PeerSeen(motion.position, at_goal, waiting, goal, way, halting)
     return seen
 
 

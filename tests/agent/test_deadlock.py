@@ -178,3 +178,19 @@ def test_a_peer_stopped_a_little_inside_the_wall_clearance_is_walled_in_all_the_
 
 def test_a_point_deep_in_a_wall_is_in_no_region(pocket):
     assert not connected(pocket, (-0.7, 0.0), WALLED_IN.goal, WALL_CLEAR, [])  # the wall's middle: 0.3 m from free
+
+
+@pytest.mark.parametrize("halting", [True, False])
+def test_a_peer_creeping_with_every_plan_ending_short_of_its_goal_is_stuck(pocket, halting):
+    """bottleneck-4 seed 4: the walled-in car crept 2.5 cm/s on its fallback, more than
+    progress_m a window, so it never counted as stalled and the parked car never stepped
+    aside. Every plan it sends ending at rest short of its goal makes it stuck all the same."""
+    watch = DeadlockWatch(1, CONFIG)
+    creep = 2.5 * CONFIG.progress_m / CONFIG.window_s  # m/s: 2.5 progress_m a window
+    asides = []
+    for t in np.arange(0.0, CONFIG.window_s + 1.0, STEP_S):
+        peer = dataclasses.replace(WALLED_IN, position=WALLED_IN.position + np.array([0.0, creep * t]),
+                                   halting=halting)
+        asides.append(watch.step_aside(t, PARKED_IN_GAP, PARKED_IN_GAP, {2: peer}, KEEP_CLEAR, pocket, WALL_CLEAR))
+    assert not watch.stalled(2, CONFIG.window_s + 0.8)
+    assert any(a is not None for a in asides) is halting
