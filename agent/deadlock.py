@@ -33,9 +33,10 @@ that corner and the door (bottleneck-4: 13 of 50 bank runs, every one this way).
 parked car steps aside (``step_aside``) when a peer that is stuck -- stalled, or
 halting: every plan it sent over the window ends at a standstill short of its goal, as
 a car creeping on its fallback's brake does (bottleneck-4 seed 4: 2.5 cm/s, more
-progress than ``progress_m``, and every plan refused) -- not at its goal, has no way to its goal -- no connected free space keeping the wall's epsilon from walls
-and eps_0 from every parked car (agent.routes.connected) -- while it would have one
-were we not where we stand. It drives ``detour_m`` to the first side (straight away from
+progress than ``progress_m``, and every plan refused) -- not at its goal, has no way to
+its goal -- no connected free space keeping the wall's epsilon from walls and eps_0
+from every parked car (agent.routes.connected) -- while it would have one were we not
+where we stand. It drives ``detour_m`` to the first side (straight away from
 the walled-in car, then turning by DETOUR_TURNS_DEG) from where the way is open, holds
 there until the peer is at its goal or has a way round our goal, at least ``yield_s`` and
 at most ASIDE_MAX_YIELDS of those, and drives back. Each counts one step aside
@@ -208,7 +209,7 @@ class DeadlockWatch:
     def stalled(self, car_id: int, now: float) -> bool:
         """Came less than progress_m nearer its goal over a whole window (moved less than
         that, for a car whose goal we do not know), seen at every sample of it."""
-        if not self.history or self.history[0][0] > now - self.config.window_s + 0.25:
+        if not self._window_full(now):
             return False
         track = [seen.get(car_id) for _, seen in self.history]
         if any(entry is None for entry in track):
@@ -224,9 +225,11 @@ class DeadlockWatch:
         whole window."""
         if self.stalled(car_id, now):
             return True
-        if not self.history or self.history[0][0] > now - self.config.window_s + 0.25:
-            return False
-        return all(seen.get(car_id, (None, None, False))[2] for _, seen in self.history)
+        return self._window_full(now) and all(seen.get(car_id, (None, None, False))[2] for _, seen in self.history)
+
+    def _window_full(self, now: float) -> bool:
+        """Whether the history spans a whole window (give or take a replan)."""
+        return bool(self.history) and self.history[0][0] <= now - self.config.window_s + 0.25
 
 
 def peers_seen(tracks: dict, views: dict, own_id: int, now: float, arrival_radius_m: float) -> dict[int, PeerSeen]:
