@@ -108,7 +108,7 @@ def run_matrix(scenes: list[str], attacks: list[str], variants: list[str], seeds
     for (scene, attack, variant, _, seed), run in parallel(run_summary, tasks, jobs):
         results.setdefault(scene, {}).setdefault(attack, {}).setdefault(variant, []).append(run)
         progress.step(f"{scene} {attack} {variant} seed {seed}: least clearance "
-                      f"{run.get('liar_min_clearance', min(min(r) for r in run['min_clearance'])):.3f} m")
+                      f"{run.get('liar_min_clearance', stats.least_pair_clearance(run)):.3f} m")
     progress.done()
     return results
 

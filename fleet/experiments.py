@@ -38,6 +38,7 @@ from ..agent import metrics
 from ..agent.config import PAPER_LIAR, AttackConfig, Scenario
 from ..agent.scenario_files import load_scenario
 from ..agent.world import build_sdf
+from . import stats
 from .command import command_parser, configured
 from .fleet_sim import simulate
 from .pool import parallel
@@ -222,7 +223,7 @@ def run_experiment(name: str, seeds: list[int], out: Path, jobs: int, scenario_f
     for (variant, _, seed), (run, record) in parallel(_job, tasks, jobs):
         results.setdefault(variant, []).append(run)
         records.setdefault(variant, []).append(record)
-        progress.step(f"{variant} seed {seed}: min clearance {np.min(np.array(run['min_clearance']) + np.eye(len(run['car_ids'])) * 9):.3f} m")
+        progress.step(f"{variant} seed {seed}: min clearance {stats.least_pair_clearance(run):.3f} m")
     progress.done()
     report = {
         "experiment": name,
@@ -245,7 +246,7 @@ def run_experiment(name: str, seeds: list[int], out: Path, jobs: int, scenario_f
 def summary(name: str, results: dict[str, list[dict]]) -> dict:
     out: dict = {}
     for variant, runs in results.items():
-        clearance = [min(c for i, row in enumerate(r["min_clearance"]) for j, c in enumerate(row) if i != j) for r in runs]
+        clearance = [stats.least_pair_clearance(r) for r in runs]
         out[variant] = {
             "runs": len(runs),
             "seeds_with_breach": sum(1 for r in runs if r["breaches"]),

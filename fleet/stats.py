@@ -31,6 +31,12 @@ FALSE_POSITIVE_TRUST = 0.8
 DETECTION_LIMIT_S = 3.0
 
 
+def least_pair_clearance(run: dict) -> float:
+    """The least clearance between two different cars of a run (its ``min_clearance``
+    matrix without the diagonal, which is each car with itself)."""
+    return min(c for i, row in enumerate(run["min_clearance"]) for j, c in enumerate(row) if i != j)
+
+
 def bootstrap_ci(values: Sequence[float], statistic: Callable = np.median, seed: int = 0) -> tuple[float, float] | None:
     """The percentile bootstrap interval of ``statistic`` (a numpy reduction taking
     ``axis``) over ``values``; None if empty."""
@@ -72,8 +78,7 @@ def cell(runs: list[dict]) -> dict:
         "honest_trust_min": round(min(honest_min), 4) if honest_min else None,
     }
     if not liar:
-        out["min_clearance_m"] = round(min(min(c for i, row in enumerate(r["min_clearance"]) for j, c in enumerate(row)
-                                               if i != j) for r in runs), 4)
+        out["min_clearance_m"] = round(min(least_pair_clearance(r) for r in runs), 4)
         return out
     lied = [r for r in runs if r.get("first_lie_s") is not None]
     delays = [r.get("detection_delay_s") for r in lied]
