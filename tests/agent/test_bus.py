@@ -1,5 +1,6 @@
 """The fleet bus on real Zenoh sessions over loopback TCP, multicast scouting off."""
 
+import contextlib
 import json
 import math
 import time
@@ -171,19 +172,31 @@ def test_silent_kinds_are_those_a_live_car_is_not_heard_on():
     assert silent_kinds(heard, alive, kinds, now, opened=now - SILENT_S - 0.1) == {"plan": [1]}
 
 
+def status_of(car: int) -> bytes:
+    return messages.encode(messages.StatusMessage(car, 1, time.time(), "driving", 1.0, 1, False, {}, 1))
+
+
+@contextlib.contextmanager
+def two_cars_watched(monkeypatch, silent_s: float):
+    """Cars 1 and 2 on real sessions, each up to the other, with the watch's silence at
+    ``silent_s`` and a redeclaration at most every second."""
+    import trustfg.fleet.bus as bus_module
+    monkeypatch.setattr(bus_module, "SILENT_S", silent_s)
+    monkeypatch.setattr(bus_module, "RESUBSCRIBE_EVERY_S", 1.0)
+    a = endpoint()
+    with FleetBus(BusConfig(listen=(a,)), FLEET, 1) as one, \
+            FleetBus(BusConfig(listen=(endpoint(),), connect=(a,)), FLEET, 2) as two:
+        assert wait_for(lambda: one.alive.get(2) and two.alive.get(1))
+        yield one, two
+
+
 @pytest.mark.parametrize("watching", [True, False])
 def test_a_subscription_zenoh_lost_is_declared_again(watching, monkeypatch):
     """Zenoh sometimes never routes one kind of one peer to a car that hears the peer's
     other kinds (seen in CI: a whole run without one peer's plans). Lose the status
     subscription on purpose: the watch declares it again; without the watch it stays lost."""
-    import trustfg.fleet.bus as bus_module
-    monkeypatch.setattr(bus_module, "SILENT_S", 1.0 if watching else math.inf)
-    monkeypatch.setattr(bus_module, "RESUBSCRIBE_EVERY_S", 1.0)
-    a = endpoint()
-    status = messages.encode(messages.StatusMessage(2, 1, time.time(), "driving", 1.0, 1, False, {}, 1))
-    with FleetBus(BusConfig(listen=(a,)), FLEET, 1) as one, \
-            FleetBus(BusConfig(listen=(endpoint(),), connect=(a,)), FLEET, 2) as two:
-        assert wait_for(lambda: one.alive.get(2) and two.alive.get(1))
+    status = status_of(2)
+    with two_cars_watched(monkeypatch, 1.0 if watching else math.inf) as (one, two):
 
         def heard(kind: str, within_s: float) -> bool:
             deadline = time.monotonic() + within_s
@@ -208,14 +221,8 @@ def test_a_live_car_heard_on_nothing_has_every_kind_declared_again(monkeypatch):
     """Seen in CI: after the first seconds a car got nothing from one peer whose token was
     up and which heard it. Lose every subscription: the watch declares each again, though
     there is no other kind the car is heard on."""
-    import trustfg.fleet.bus as bus_module
-    monkeypatch.setattr(bus_module, "SILENT_S", 1.0)
-    monkeypatch.setattr(bus_module, "RESUBSCRIBE_EVERY_S", 1.0)
-    a = endpoint()
-    status = messages.encode(messages.StatusMessage(2, 1, time.time(), "driving", 1.0, 1, False, {}, 1))
-    with FleetBus(BusConfig(listen=(a,)), FLEET, 1) as one, \
-            FleetBus(BusConfig(listen=(endpoint(),), connect=(a,)), FLEET, 2) as two:
-        assert wait_for(lambda: one.alive.get(2) and two.alive.get(1))
+    status = status_of(2)
+    with two_cars_watched(monkeypatch, 1.0) as (one, two):
         for kind in list(one._subscribers):
             one._subscribers[kind].undeclare()  # all lost
         kinds: set[str] = set()
