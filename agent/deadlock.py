@@ -54,6 +54,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .config import DeadlockConfig
+from .fallback import MOVING_MPS  # the fallback's "comes to rest": the same test of a plan's end
 from .routes import connected
 from .world import SignedDistanceField
 
@@ -65,8 +66,6 @@ SEEN_S = 0.5
 WAITING_S = 0.05
 """A peer whose latest plan starts this much after it was sent has not departed yet."""
 WAY_SAMPLES = 20
-HALT_MPS = 0.02
-"""A plan whose last support state is slower than this ends at a standstill."""
 ASIDE_MAX_YIELDS = 4
 """A step aside ends after at most this many ``yield_s``, walled-in peer or not."""
 
@@ -249,7 +248,7 @@ def peers_seen(tracks: dict, views: dict, own_id: int, now: float, arrival_radiu
             plan = view.accepted
             way = plan.position_at(np.linspace(now, max(now, plan.t_end), WAY_SAMPLES))
             way = way if goal is None else np.vstack([way, goal])
-            halting = (goal is not None and plan.n > 0 and float(np.linalg.norm(plan.velocities[-1])) < HALT_MPS
+            halting = (goal is not None and plan.n > 0 and float(np.linalg.norm(plan.velocities[-1])) < MOVING_MPS
                        and float(np.linalg.norm(plan.positions[-1] - goal)) > arrival_radius_m)
         seen[car_id] = PeerSeen(motion.position, at_goal, waiting, goal, way, halting)
     return seen
