@@ -33,18 +33,23 @@ class ClockEstimate:
     tolerance_s: float
     samples: deque = field(default_factory=lambda: deque(maxlen=512))
     """(arrival, stamp - arrival), bounded."""
+    _offset: float | None = field(default=None, init=False, repr=False)
+    """Cache of ``offset`` until the next sample (every received message reads it)."""
 
     def add(self, stamp: float, arrival: float) -> None:
         self.samples.append((arrival, stamp - arrival))
         while self.samples and self.samples[0][0] < arrival - self.window_s:
             self.samples.popleft()
+        self._offset = None
 
     @property
     def offset(self) -> float:
         if not self.samples:
             return 0.0
-        best = max(sample for _, sample in self.samples)
-        return min(self.tolerance_s, max(-self.tolerance_s, best))
+        if self._offset is None:
+            best = max(sample for _, sample in self.samples)
+            self._offset = min(self.tolerance_s, max(-self.tolerance_s, best))
+        return self._offset
 
     def to_ours(self, stamp: float) -> float:
         """A time on the peer's clock, on ours."""

@@ -8,7 +8,7 @@ without the lag of a low-pass filter on finite differences.
 
 from __future__ import annotations
 
-from collections import deque
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -26,50 +26,81 @@ class Motion:
     yaw: float
 
 
+MAX_SAMPLES = 4096
+"""At most this many observations are kept (2 s of a 2 kHz stream): frames that come far
+faster than any motion capture sends cannot grow a track without bound."""
+
+
 @dataclass
 class Track:
     window_s: float = 0.4
     history_s: float = 2.0
-    samples: deque = field(default_factory=deque)
+    _buffer: np.ndarray = field(default_factory=lambda: np.empty((256, 4)), init=False, repr=False)
+    """Rows (t, x, y, yaw); the live ones are ``_buffer[_lo:_hi]``, oldest first. Appends
+    go at the end and old rows leave at the front, so reads are slices of one array: a
+    car observes every body at the motion capture's rate, and audits read them as often."""
+    _lo: int = field(default=0, init=False, repr=False)
+    _hi: int = field(default=0, init=False, repr=False)
     _motion: Motion | None = field(default=None, init=False, repr=False)
-    _array: np.ndarray | None = field(default=None, init=False, repr=False)
-    """Caches of motion() and of the samples as an array, until the next sample."""
+    """Cache of motion(), until the next sample."""
+
+    @property
+    def samples(self) -> np.ndarray:
+        """The observations kept, rows (t, x, y, yaw) oldest first: a view that the next
+        ``add`` may change."""
+        return self._buffer[self._lo:self._hi]
 
     def add(self, t: float, x: float, y: float, yaw: float) -> None:
-        if not (np.isfinite(t) and np.isfinite(x) and np.isfinite(y) and np.isfinite(yaw)):
+        if not (math.isfinite(t) and math.isfinite(x) and math.isfinite(y) and math.isfinite(yaw)):
             return
-        if self.samples and t <= self.samples[-1][0]:
+        if self._hi > self._lo and t <= self._buffer[self._hi - 1, 0]:
             return  # out of order or duplicate
-        self.samples.append((t, x, y, yaw))
-        while self.samples and self.samples[0][0] < t - self.history_s:
-            self.samples.popleft()
-        self._motion = self._array = None
+        if self._hi == len(self._buffer):
+            self._make_room()
+        self._buffer[self._hi] = (t, x, y, yaw)
+        self._hi += 1
+        times = self._buffer[:, 0]
+        cutoff = t - self.history_s
+        while times[self._lo] < cutoff or self._hi - self._lo > MAX_SAMPLES:
+            self._lo += 1
+        self._motion = None
+
+    def _make_room(self) -> None:
+        """Move the live rows to the front, in a larger buffer if they fill half of it."""
+        live = self._hi - self._lo
+        if 2 * live > len(self._buffer):
+            grown = np.empty((2 * len(self._buffer), 4))
+            grown[:live] = self._buffer[self._lo:self._hi]
+            self._buffer = grown
+        else:
+            self._buffer[:live] = self._buffer[self._lo:self._hi].copy()
+        self._lo, self._hi = 0, live
 
     def clear(self) -> None:
-        self.samples.clear()
-        self._motion = self._array = None
+        self._lo = self._hi = 0
+        self._motion = None
 
     @property
     def last_stamp(self) -> float | None:
-        return self.samples[-1][0] if self.samples else None
+        return float(self._buffer[self._hi - 1, 0]) if self._hi > self._lo else None
 
     def motion(self) -> Motion | None:
         """Fitted motion at the latest sample, or None with no observation yet."""
-        if not self.samples:
+        if self._hi == self._lo:
             return None
         if self._motion is None:
             self._motion = self._fit()
         return self._motion
 
     def _fit(self) -> Motion:
-        t_last, x, y, yaw = self.samples[-1]
-        recent = [s for s in self.samples if s[0] >= t_last - self.window_s]
+        samples = self.samples
+        t_last, x, y, yaw = (float(v) for v in samples[-1])
+        recent = samples[np.searchsorted(samples[:, 0], t_last - self.window_s):]
         if len(recent) < 4:
             return Motion(t_last, np.array([x, y]), np.zeros(2), np.zeros(2), yaw)
-        data = np.asarray(recent)
-        tau = data[:, 0] - t_last
+        tau = recent[:, 0] - t_last
         design = np.stack([np.ones_like(tau), tau, tau**2], axis=1)
-        coef, *_ = np.linalg.lstsq(design, data[:, 1:3], rcond=None)
+        coef, *_ = np.linalg.lstsq(design, recent[:, 1:3], rcond=None)
         return Motion(t_last, coef[0], coef[1], 2.0 * coef[2], yaw)
 
     def position_at(self, t: float) -> np.ndarray | None:
@@ -81,12 +112,11 @@ class Track:
         """Observed positions (k, 2) at ``times`` (nearest sample) and whether one was
         within NEAREST_S of each."""
         times = np.asarray(times, dtype=float)
-        if not self.samples:
+        samples = self.samples
+        if not len(samples):
             return np.zeros((len(times), 2)), np.zeros(len(times), dtype=bool)
-        if self._array is None:
-            self._array = np.asarray(self.samples, dtype=float)
-        stamps = self._array[:, 0]
+        stamps = samples[:, 0]
         right = np.clip(np.searchsorted(stamps, times), 0, len(stamps) - 1)
         left = np.clip(right - 1, 0, len(stamps) - 1)
         nearest = np.where(np.abs(stamps[left] - times) <= np.abs(stamps[right] - times), left, right)
-        return self._array[nearest, 1:3].copy(), np.abs(stamps[nearest] - times) <= NEAREST_S
+        return samples[nearest, 1:3], np.abs(stamps[nearest] - times) <= NEAREST_S
