@@ -20,6 +20,11 @@ whose liveliness token is up but that was not heard on kind K for ``SILENT_S`` h
 subscribed again, at most every ``RESUBSCRIBE_EVERY_S`` (counted:
 ``resubscribed_<kind>``). A car that only stopped publishing K, or is cut off behind a
 partition, costs a redeclaration every few seconds, no more.
+
+The watch also tells when this process hears nothing from any live car for ``DEAF_S``
+(a deaf spell: a warning with the session's links when it starts and when it ends,
+counted as ``deaf_spells`` and ``deaf_ms_max``): what stalls a whole process's receiving,
+not one subscription.
 """
 
 from __future__ import annotations
@@ -51,6 +56,9 @@ SILENT_S = 3.0
 trust 0.5 s, plans 0.1 s, poses 0.05 s): three seconds without one is a lost subscription,
 not a gap (a lab that sets slower periods pays a needless redeclaration now and then)."""
 RESUBSCRIBE_EVERY_S = 5.0
+DEAF_S = 1.5
+"""Nothing from any live car for this long is a deaf spell: every car publishes a pose
+every 50 ms, so 1.5 s of nothing from all of them is the process, not the peers."""
 
 
 def silent_kinds(heard: dict[tuple[int, str], float], alive: dict[int, bool], kinds: tuple[str, ...],
@@ -182,6 +190,7 @@ class FleetBus:
         self._heard: dict[tuple[int, str], float] = {}
         self._opened = math.inf
         self._next_watch = 0.0
+        self._deaf_since: float | None = None
         self._resubscribed: dict[str, float] = {}
 
     # --- lifecycle -------------------------------------------------------------------------
@@ -271,6 +280,7 @@ class FleetBus:
             heard, alive = dict(self._heard), dict(self.alive)
         if self.car_id is not None:
             alive[self.car_id] = False  # never watch ourselves
+        self._watch_deafness(heard, alive, now)
         for kind, cars in silent_kinds(heard, alive, self.kinds, now, self._opened).items():
             if now - self._resubscribed.get(kind, -math.inf) < RESUBSCRIBE_EVERY_S:
                 continue
@@ -291,6 +301,34 @@ class FleetBus:
                 self.counters[f"resubscribed_{kind}"] += 1
             except Exception as exc:  # a closing session: nothing to watch any more
                 log.warning("subscribing to %s again failed: %s", kind, exc)
+
+    def _watch_deafness(self, heard: dict[tuple[int, str], float], alive: dict[int, bool], now: float) -> None:
+        """Nothing from any live car for DEAF_S: a deaf spell, counted (``deaf_spells``,
+        ``deaf_ms_max``) and told with the session's links when it starts and ends."""
+        last = max([self._opened, *(at for (car, _), at in heard.items() if car != self.car_id)])
+        up = sum(alive.values())
+        if up and now - last > DEAF_S and self._deaf_since is None:
+            self._deaf_since = last
+            self.counters["deaf_spells"] += 1
+            log.warning("%s: heard nothing from any car for %.1f s, though %d token%s up; links: %s",
+                        self._me, now - last, up, "s are" if up > 1 else " is", self._links_said())
+        elif self._deaf_since is not None and now - last <= DEAF_S:
+            spell_ms = round((last - self._deaf_since) * 1e3)
+            self.counters["deaf_ms_max"] = max(self.counters["deaf_ms_max"], spell_ms)
+            log.warning("%s: hears cars again after %.1f s of nothing; links: %s", self._me, spell_ms / 1e3,
+                        self._links_said())
+            self._deaf_since = None
+
+    @property
+    def _me(self) -> str:
+        return f"car {self.car_id}" if self.car_id else "observer"
+
+    def _links_said(self) -> str:
+        try:
+            return ", ".join(f"{dst}{'' if reliable else ' (best effort)'}" for _, dst, reliable in self.links()) \
+                or "none"
+        except Exception as exc:  # noqa: BLE001 -- a closing session
+            return f"unknown ({exc})"
 
     def close(self, timeout_s: float = CLOSE_TIMEOUT_S) -> None:
         """Undeclare everything and close the session, giving up after ``timeout_s``:

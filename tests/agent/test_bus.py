@@ -234,3 +234,35 @@ def test_a_live_car_heard_on_nothing_has_every_kind_declared_again(monkeypatch):
             time.sleep(0.05)
         assert kinds == {"pose", "status"}
         assert one.counters["resubscribed_pose"] >= 1 and one.counters["resubscribed_status"] >= 1
+
+
+def test_a_process_that_hears_no_car_for_a_while_says_so_and_how_long(monkeypatch, caplog):
+    """A deaf spell: car 2's token is up, nothing of it arrives for longer than DEAF_S.
+    Counted and told when it starts and when it ends, with its length."""
+    import trustfg.fleet.bus as bus_module
+    monkeypatch.setattr(bus_module, "DEAF_S", 0.6)
+    with two_cars_watched(monkeypatch, math.inf) as (one, two):
+
+        def talk(seconds: float) -> None:
+            deadline = time.monotonic() + seconds
+            while time.monotonic() < deadline:
+                two.publish("pose", pose(2, int(time.monotonic() * 1e3)))
+                one.drain()
+                time.sleep(0.05)
+
+        def quiet(seconds: float) -> None:
+            deadline = time.monotonic() + seconds
+            while time.monotonic() < deadline:
+                one.drain()
+                time.sleep(0.05)
+
+        talk(1.5)
+        assert one.counters["deaf_spells"] == 0  # hearing the car: no spell
+        quiet(2.0)
+        assert one.counters["deaf_spells"] == 1
+        talk(1.0)
+        assert 1400 <= one.counters["deaf_ms_max"] <= 3000, one.counters
+        assert any("heard nothing from any car" in r.message for r in caplog.records)
+        assert any("hears cars again after" in r.message for r in caplog.records)
+        quiet(0.3)
+        assert one.counters["deaf_spells"] == 1  # the spell ended: not counted twice
