@@ -24,7 +24,7 @@ partition, costs a redeclaration every few seconds, no more.
 The watch also tells when this process hears nothing from any live car for ``DEAF_S``
 (a deaf spell: a warning with the session's links when it starts and when it ends,
 counted as ``deaf_spells`` and ``deaf_ms_max``): what stalls a whole process's receiving,
-not one subscription.
+not one subscription, as Zenoh's lingering TCP closes did (RX_THREADS).
 """
 
 from __future__ import annotations
@@ -32,6 +32,7 @@ from __future__ import annotations
 import json
 import logging
 import math
+import os
 import re
 import threading
 import time
@@ -50,6 +51,13 @@ from .keys import ALIVE, CLOCK, HEARTBEAT, KINDS, OPERATOR, START, STOP, every_c
 log = logging.getLogger(__name__)
 
 CLOSE_TIMEOUT_S = 2.0
+RX_THREADS = 8
+"""Zenoh's receiving threads per process (its default is 2). Zenoh drops a TCP link that
+could not flush for a quarter of its lease, and the dropped socket lingers in close() --
+SO_LINGER of 10 s, compiled into Zenoh -- inside a receiving thread while unsent data
+waits. At 50 % loss two such closes at once left a car hearing nothing from any peer for
+2-10 s (gdb: both rx threads in close()). A blocked thread sleeps: more of them cost no
+CPU, and the others go on receiving."""
 WATCH_PERIOD_S = 0.5
 SILENT_S = 3.0
 """With the control defaults a car publishes every kind at least every 0.5 s (status and
@@ -128,6 +136,12 @@ def zenoh_config(bus: BusConfig, extra_listen: tuple[str, ...] = ()) -> zenoh.Co
     return config
 
 
+def zenoh_runtime_threads() -> None:
+    """Ask for RX_THREADS receiving threads, unless ZENOH_RUNTIME says otherwise. Zenoh
+    reads the variable when its runtime starts: call before the process's first session."""
+    os.environ.setdefault("ZENOH_RUNTIME", f"(rx: (worker_threads: {RX_THREADS}))")
+
+
 def _said(exc: Exception) -> str:
     """Zenoh's message on one line, without the Rust source location it ends with."""
     return " ".join(line.strip() for line in str(exc).split(" at /")[0].splitlines() if line.strip())
@@ -203,6 +217,7 @@ class FleetBus:
         self.close()
 
     def open(self) -> None:
+        zenoh_runtime_threads()
         try:
             config = zenoh_config(self.config, self._listen)
             self._session = zenoh.open(config)

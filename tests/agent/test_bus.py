@@ -266,3 +266,35 @@ def test_a_process_that_hears_no_car_for_a_while_says_so_and_how_long(monkeypatc
         assert any("hears cars again after" in r.message for r in caplog.records)
         quiet(0.3)
         assert one.counters["deaf_spells"] == 1  # the spell ended: not counted twice
+
+
+RX_THREADS_PROBE = """
+import os, time
+from trustfg.agent.config import BusConfig
+from trustfg.fleet.bus import FleetBus
+a, b = "tcp/127.0.0.1:{a}", "tcp/127.0.0.1:{b}"
+with FleetBus(BusConfig(listen=(a,)), "t", 1) as one, FleetBus(BusConfig(listen=(b,), connect=(a,)), "t", 2) as two:
+    deadline = time.monotonic() + 10
+    while not (one.alive.get(2) and two.alive.get(1)) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    names = [open(f"/proc/self/task/{{t}}/comm").read().strip() for t in os.listdir("/proc/self/task")]
+    print(sum(name.startswith("rx-") for name in names))
+"""
+
+
+@pytest.mark.parametrize("preset, threads", [(None, None), ("(rx: (worker_threads: 3))", 3)])
+def test_zenoh_receives_on_as_many_threads_as_the_bus_asks_unless_told_otherwise(preset, threads):
+    """Zenoh's lingering TCP closes block a receiving thread each (RX_THREADS): a car
+    process asks for more of them than Zenoh's two; a ZENOH_RUNTIME of the user's stands."""
+    import os
+    import subprocess
+    import sys
+
+    from trustfg.fleet.bus import RX_THREADS
+    env = {k: v for k, v in os.environ.items() if k != "ZENOH_RUNTIME"}
+    if preset is not None:
+        env["ZENOH_RUNTIME"] = preset
+    probe = RX_THREADS_PROBE.format(a=free_tcp_port(), b=free_tcp_port())
+    out = subprocess.run([sys.executable, "-c", probe], env=env, capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    assert int(out.stdout.strip().splitlines()[-1]) == (threads or RX_THREADS)

@@ -15,9 +15,9 @@ pytestmark = [pytest.mark.faults,
 STOP_WITHIN_S = 0.25 + 0.02  # the 250 ms watchdog, plus mocap-sim's physics scheduling (5 ms ticks)
 RECOVER_WITHIN_S = 3.0  # plans resynchronised after a heal or restart (measured 0.8-1.4 s)
 TRUST_FLOOR = 0.6  # below the prior (2/3) only by evidence of misbehaviour, never by silence
-PLAN_AGE_P99_MS = 1000  # a car's view of every peer's plan at 10 and 30 % loss (best-effort plans)
-PLAN_AGE_P50_MS_AT_50 = 300  # at 50 %: fresh most of the time (TCP alone: p50 8.5 s). Its p99 is not
-# yet within 1 s in every run: at times one car hears no peer for seconds (README, "Faults").
+PLAN_AGE_P99_MS = 1000  # a car's view of every peer's plan at 10, 30 and 50 % loss (best-effort plans;
+# at 50 % it held in 24 of 24 runs once Zenoh got more receiving threads, fleet/bus.py RX_THREADS)
+PLAN_AGE_P50_MS_AT_50 = 300  # at 50 %: fresh most of the time (TCP alone: p50 8.5 s)
 
 
 @pytest.mark.parametrize("name", list(CASES))
@@ -44,7 +44,8 @@ def test_fault(name, tmp_path):
             # twice: least 0.80 and 0.83), but with little to spare: a miss is reported as
             # an expected failure with the value; every safety assertion above stays strict.
             pytest.xfail(f"issue 10 open: honest trust after 3 s {row['trust_after_3s']} < 0.8 under loss, delay and skew")
-    if name in ("loss-10", "loss-30"):
+    if name in ("loss-10", "loss-30", "loss-50"):
         assert row["plan_age_ms_p99"] <= PLAN_AGE_P99_MS, row
     if name == "loss-50":
         assert row["plan_age_ms_p50"] <= PLAN_AGE_P50_MS_AT_50, row
+        assert row["trust_after_3s"] is not None and row["trust_after_3s"] >= 0.8, row  # loss is no lie
