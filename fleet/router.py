@@ -23,6 +23,7 @@ from importlib import resources
 import zenoh
 
 from ..agent.config import Scenario
+from .bus import zenoh_runtime_threads
 from .command import command_parser, stop_on_signals
 
 log = logging.getLogger(__name__)
@@ -59,6 +60,7 @@ def main(argv: list[str] | None = None) -> int:
                         help="listen here instead of the config's endpoints, e.g. tcp/0.0.0.0:7447 (repeatable)")
     args = parser.parse_args(argv)
     stop = stop_on_signals(threading.Event())
+    zenoh_runtime_threads()  # a router links every car: one lingering close must not stall it
     try:
         session = zenoh.open(router_config(args.config, args.listen))
     except Exception as exc:  # zenoh raises its own errors for bad files, values or busy ports
