@@ -320,7 +320,7 @@ class FleetBus:
     def _watch_deafness(self, heard: dict[tuple[int, str], float], alive: dict[int, bool], now: float) -> None:
         """Nothing from any live car for DEAF_S: a deaf spell, counted (``deaf_spells``,
         ``deaf_ms_max``) and told with the session's links when it starts and ends."""
-        last = max([self._opened, *(at for (car, _), at in heard.items() if car != self.car_id)])
+        last = max([self._opened, *(at for (car, _), at in heard.items() if car in alive)])  # cars, not the operator
         up = sum(alive.values())
         if up and now - last > DEAF_S and self._deaf_since is None:
             self._deaf_since = last

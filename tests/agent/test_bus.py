@@ -241,7 +241,8 @@ def test_a_process_that_hears_no_car_for_a_while_says_so_and_how_long(monkeypatc
     Counted and told when it starts and when it ends, with its length."""
     import trustfg.fleet.bus as bus_module
     monkeypatch.setattr(bus_module, "DEAF_S", 0.6)
-    with two_cars_watched(monkeypatch, math.inf) as (one, two):
+    with two_cars_watched(monkeypatch, math.inf) as (one, two), contextlib.ExitStack() as stack:
+        one_endpoint = one.config.listen[0]
 
         def talk(seconds: float) -> None:
             deadline = time.monotonic() + seconds
@@ -250,12 +251,16 @@ def test_a_process_that_hears_no_car_for_a_while_says_so_and_how_long(monkeypatc
                 one.drain()
                 time.sleep(0.05)
 
-        def quiet(seconds: float) -> None:
+        def quiet(seconds: float) -> None:  # the cars say nothing; the operator's heartbeat goes on
             deadline = time.monotonic() + seconds
             while time.monotonic() < deadline:
+                operator.publish("heartbeat", messages.encode(messages.HeartbeatMessage(
+                    messages.operator_seq(time.time()), time.time())))
                 one.drain()
                 time.sleep(0.05)
 
+        operator = stack.enter_context(FleetBus(BusConfig(listen=(endpoint(),), connect=(one_endpoint,)), FLEET))
+        assert wait_for(lambda: (quiet(0.1), one.counters["received_heartbeat"] > 0)[1], 5.0)
         talk(1.5)
         assert one.counters["deaf_spells"] == 0  # hearing the car: no spell
         quiet(2.0)
