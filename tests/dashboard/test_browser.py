@@ -58,8 +58,15 @@ def live_run(intersection, tmp_path_factory):
     out = tmp_path_factory.mktemp("dashboard-run")
     port = free_port()
     result = {}
-    thread = threading.Thread(target=lambda: result.setdefault("summary", run(fleet, out, seed=21, dashboard_port=port)),
-                              daemon=True)
+
+    def launch():
+        try:
+            result["summary"] = run(fleet, out, seed=21, dashboard_port=port)
+        except BaseException as exc:  # told by the test that waits for the page, not lost in a thread
+            result["error"] = exc
+            raise
+
+    thread = threading.Thread(target=launch, daemon=True)
     published = Published(fleet)
     published.bus.open()
     thread.start()
@@ -75,12 +82,23 @@ def page_up(port):
         return False
 
 
+def why_not_up(out, thread, result) -> str:
+    """What there is to say when the run's dashboard never answered: the run's error, or
+    the end of the dashboard's log."""
+    log = out / "dashboard.log"
+    tail = log.read_text(errors="replace").splitlines()[-15:] if log.exists() else ["(no dashboard.log)"]
+    return (f"the dashboard did not come up; the run {'ended' if not thread.is_alive() else 'is running'}"
+            f"{', raising ' + repr(result['error']) if 'error' in result else ''}; dashboard.log ends:\n"
+            + "\n".join(tail))
+
+
 def test_the_live_page_draws_the_published_poses_trust_and_alerts(live_run):
     from playwright.sync_api import sync_playwright
 
-    fleet, out, port, published, thread, _ = live_run
+    fleet, out, port, published, thread, result = live_run
     ARTIFACTS.mkdir(exist_ok=True)
-    assert wait_for(lambda: page_up(port), 60.0), "the dashboard did not come up"
+    assert wait_for(lambda: page_up(port) or not thread.is_alive(), 60.0) and page_up(port), \
+        why_not_up(out, thread, result)
     with sync_playwright() as pw:
         browser = pw.chromium.launch(executable_path=chromium(), args=CHROMIUM_FLAGS)
         try:
