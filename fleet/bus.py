@@ -305,7 +305,7 @@ class FleetBus:
             lost = [car for car in cars if (car, kind) in heard]
             log.log(logging.WARNING if lost else logging.INFO,
                     "%s: no %s from car%s %s for %.0f s, though %s token is up: subscribing to %s again",
-                    f"car {self.car_id}" if self.car_id else "observer", kind, "s" if len(cars) > 1 else "",
+                    self._me, kind, "s" if len(cars) > 1 else "",
                     ", ".join(map(str, cars)), SILENT_S, "their" if len(cars) > 1 else "its", kind)
             try:
                 self._subscribers[kind].undeclare()
