@@ -19,7 +19,6 @@ from __future__ import annotations
 import argparse
 import json
 import multiprocessing as mp
-import socket
 import statistics
 import time
 
@@ -30,14 +29,10 @@ from trustfg.agent import messages
 from trustfg.agent.config import BusConfig
 from trustfg.agent.gp import Plan
 from trustfg.fleet.bus import FleetBus, zenoh_config
+from trustfg.fleet.ports import free_port
 
 FLEET = "bench"
 
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def plan_bytes(seq: int) -> bytes:

@@ -39,8 +39,8 @@ import numpy as np
 from trustfg.agent import messages
 from trustfg.agent.scenario_files import load_scenario
 from trustfg.fleet.bus import FleetBus
-from trustfg.fleet.launch import free_port
 from trustfg.fleet.operator import OperatorSession
+from trustfg.fleet.ports import free_port
 from trustfg.fleet.testbed import CommandLog
 
 HOLD_S = 1.0

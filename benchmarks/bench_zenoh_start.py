@@ -29,14 +29,10 @@ import zenoh
 import zenoh.ext as zext
 
 from trustfg.fleet.bus import SILENT_S
+from trustfg.fleet.ports import free_port
 
 KINDS = ("plan", "status")
 
-
-def free_port(kind: int = socket.SOCK_STREAM) -> int:
-    with socket.socket(socket.AF_INET, kind) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def config(listen: tuple[str, ...], connect: tuple[str, ...]) -> zenoh.Config:

@@ -56,6 +56,7 @@ from .fleet_sim import draw_departures
 from .laps import final_legs
 from .link_keys import with_link_keys
 from .operator import OperatorSession
+from .ports import free_port
 from .processes import READY_TIMEOUT_S, Processes, wait_ready
 from .recording import convert_run
 from .scenes import scene_problem
@@ -64,12 +65,6 @@ from .sim_summary import Recorder, print_summary, summarise
 log = logging.getLogger(__name__)
 
 START_LEAD_S = 1.0
-
-
-def free_port(kind: int = socket.SOCK_STREAM) -> int:
-    with socket.socket(socket.AF_INET, kind) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def default_scenario(cars: int | None) -> str:

@@ -13,6 +13,7 @@ import pytest
 
 from trustfg.agent.scenario_files import load_scenario
 from trustfg.agent.world import build_sdf
+from trustfg.fleet.ports import free_port
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENARIOS = ROOT / "deploy" / "scenarios"
@@ -34,10 +35,8 @@ def intersection_sdf(intersection):
 
 
 def free_tcp_port() -> int:
-    """A TCP port nobody listens on right now (bind to 0, read it, release it)."""
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+    """A TCP port nobody listens on right now, outside the ephemeral range (fleet.ports)."""
+    return free_port()
 
 
 def wait_for(predicate, timeout: float = 5.0, interval: float = 0.01) -> bool:
@@ -143,9 +142,7 @@ _groups = itertools.count(1)
 
 
 def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+    return free_port(socket.SOCK_DGRAM)
 
 
 def next_multicast_group() -> str:

@@ -18,7 +18,8 @@ from tests.conftest import ROOT, wait_for
 from trustfg.agent import messages
 from trustfg.dashboard.server import replay_to_end
 from trustfg.fleet.bus import FleetBus
-from trustfg.fleet.launch import free_port, loopback_fleet, run
+from trustfg.fleet.launch import loopback_fleet, run
+from trustfg.fleet.ports import free_port
 from trustfg.fleet.recording import read_recording
 
 ARTIFACTS = ROOT / "test-artifacts"

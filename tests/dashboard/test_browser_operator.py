@@ -11,7 +11,7 @@ import pytest
 
 from tests.conftest import wait_for
 from tests.dashboard.test_browser import ARTIFACTS, CHROMIUM_FLAGS, chromium, page_up
-from trustfg.fleet.launch import free_port
+from trustfg.fleet.ports import free_port
 from trustfg.fleet.testbed import LoopbackFleet
 
 TOKEN = "operator-token-made-by-the-test"

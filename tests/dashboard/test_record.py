@@ -11,7 +11,7 @@ from trustfg.agent import messages
 from trustfg.agent.config import BusConfig
 from trustfg.agent.scenario_files import dump_scenario
 from trustfg.fleet.bus import FleetBus
-from trustfg.fleet.launch import free_port
+from trustfg.fleet.ports import free_port
 from trustfg.fleet.recording import read_recording
 
 

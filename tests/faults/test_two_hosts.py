@@ -13,7 +13,8 @@ import sys
 import pytest
 
 from trustfg.fleet import netem
-from trustfg.fleet.launch import free_port, loopback_fleet, run
+from trustfg.fleet.launch import loopback_fleet, run
+from trustfg.fleet.ports import free_port
 from trustfg.fleet.router import through_router
 
 pytestmark = [pytest.mark.faults,

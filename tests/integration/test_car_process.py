@@ -16,8 +16,9 @@ from trustfg.agent.scenario_files import dump_scenario
 from trustfg.bridge import natnet
 from trustfg.bridge.carlink import CommandReceiver, link_key, new_key
 from trustfg.fleet.bus import FleetBus
-from trustfg.fleet.launch import free_port, loopback_fleet
+from trustfg.fleet.launch import loopback_fleet
 from trustfg.fleet.link_keys import with_link_keys
+from trustfg.fleet.ports import free_port
 from trustfg.mocap_sim.natnet_server import NatNetServer, NatNetServerOptions
 
 

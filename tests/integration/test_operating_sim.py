@@ -10,7 +10,7 @@ import sys
 import time
 
 from tests.conftest import wait_for
-from trustfg.fleet.launch import free_port
+from trustfg.fleet.ports import free_port
 from trustfg.fleet.testbed import CommandLog
 
 

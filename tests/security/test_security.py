@@ -14,7 +14,7 @@ from tests.conftest import ROOT, wait_for
 from trustfg.agent import messages
 from trustfg.agent.config import BusConfig
 from trustfg.fleet.bus import FleetBus, zenoh_config
-from trustfg.fleet.launch import free_port
+from trustfg.fleet.ports import free_port
 from trustfg.fleet.security import secure_config
 
 FLEET = "sec"
