@@ -40,6 +40,8 @@ from .track import Motion
 
 HISTORY = 64
 """Own true plans kept for replay (at 5 Hz: 12.8 s)."""
+TOLD = 512
+"""Plans as published kept for experiments' bookkeeping (at 5 Hz: 100 s)."""
 FRAMING_SPEED_MPS = 0.5
 """How fast a framer plans to close in on its victim."""
 
@@ -67,8 +69,10 @@ class Liar:
     after the next plan). A claim further ahead is superseded before it comes due, and no
     observation can tell it from a mind changed in time."""
     first_lie_at: float | None = None
-    """When it first published such a lie (bookkeeping for experiments: detection is
-    timed from there)."""
+    """When it first published such a lie (bookkeeping for experiments)."""
+    told: deque = field(default_factory=lambda: deque(maxlen=TOLD))
+    """(stamp, plan as published, whether it lied), for experiments to find when a lie
+    first came due (audit.first_false_claim)."""
 
     def plan(self, plan: Plan, now: float, own: Motion | None, seen: dict[int, Motion]) -> tuple[Plan, float]:
         """The plan and stamp to publish instead of (``plan``, ``now``)."""
@@ -82,6 +86,7 @@ class Liar:
                 out, stamp, told = lie(self, self.attack.of(name), out, stamp, now, own, seen)
                 lied |= told
         self.history.append((now, plan))
+        self.told.append((stamp, out, lied))
         if lied:
             self.counters["plans_falsified"] += 1
             if self.first_lie_at is None and _deviation(out, stamp, plan, now, self.horizon_s) > self.tolerance_m:

@@ -129,17 +129,19 @@ def table(summary: dict, title: str) -> str:
                 makespan = stats.show(c["makespan_s"], 1) + (f" ({stuck} not all arrived)" if stuck else "")
                 if "breach_rate" not in c:  # an honest fleet: any breach, no detection
                     rows.append([scene, attack, variant, f"{c['breach_seeds_any']}/{c['runs']} (any pair)",
-                                 f"{c['min_clearance_m']:.3f}", "-", "-",
+                                 f"{c['min_clearance_m']:.3f}", "-", "-", "-",
                                  stats.show(c["false_positive_rate"], 0, True), makespan])
                     continue
                 never = f" ({c['never_detected']} never)" if c["never_detected"] else ""
                 rows.append([scene, attack, variant,
                              f"{c['breach_seeds']}/{c['runs']} ({stats.show(c['breach_rate'], 0, True)})",
-                             f"{c['min_clearance_m']:.3f}", stats.show(c["detected_3s_rate"], 0, True),
-                             stats.show(c["detection_s"], 1) + never, stats.show(c["false_positive_rate"], 0, True),
+                             f"{c['min_clearance_m']:.3f}", stats.show(c["detected_3s_rate"], 0, True)
+                             + (f" ({c['withdrawn']} withdrawn)" if c.get("withdrawn") else ""),
+                             stats.show(c.get("detected_3s_told_rate"), 0, True), stats.show(c["detection_s"], 1) + never, stats.show(c["false_positive_rate"], 0, True),
                              makespan])
     return stats.markdown(title, ["scene", "attack", "fleet", "honest-liar breaches (seeds)", "least clearance (m)",
-                                  "detected within 3 s of the first lie", "detection (s), median", "false positives",
+                                  "detected within 3 s of the first lie due",
+                                  "... of the first lie told", "detection (s), median", "false positives",
                                   "makespan (s), median"], rows)
 
 

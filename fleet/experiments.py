@@ -35,6 +35,7 @@ from typing import Callable
 import numpy as np
 
 from ..agent import metrics
+from ..agent.audit import first_false_claim
 from ..agent.config import PAPER_LIAR, AttackConfig, Scenario
 from ..agent.scenario_files import load_scenario
 from ..agent.world import build_sdf
@@ -170,6 +171,12 @@ def _sdf(world):
     return build_sdf(world)
 
 
+def _truth(record: RunRecord, car: int):
+    """Where car (index) ``car`` truly was at given times (linear between recorded steps)."""
+    times, xy = record.times, record.states[:, car, :2]
+    return lambda t: np.stack([np.interp(t, times, xy[:, 0]), np.interp(t, times, xy[:, 1])], axis=1)
+
+
 def run_one(scenario: Scenario, seed: int) -> tuple[dict, RunRecord]:
     """Simulate one seed and summarise it as a RUN dict (see the README)."""
     record = simulate(scenario, seed, sdf=_sdf(scenario.world))
@@ -197,8 +204,16 @@ def summarise(scenario: Scenario, record: RunRecord) -> dict:
         run["trust_detected_at_s"] = None if None in detected else max(detected)
         lies = [record.first_lie_s[i] for i in liars if record.first_lie_s and record.first_lie_s[i] is not None]
         run["first_lie_s"] = round(float(min(lies)), 3) if lies else None
-        run["detection_delay_s"] = (round(run["trust_detected_at_s"] - run["first_lie_s"], 3)
-                                    if lies and run["trust_detected_at_s"] is not None else None)
+        due = [first_false_claim(record.told[i], _truth(record, i), scenario.trust)
+               for i in liars if record.told and record.told[i]]
+        due = [t for t in due if t is not None]
+        run["first_lie_due_s"] = round(min(due), 3) if due else None
+        detected = run["trust_detected_at_s"]
+        run["detection_after_told_s"] = round(detected - run["first_lie_s"], 3) if lies and detected is not None else None
+        # timed from the first lie that came due, when any observer could first catch it;
+        # a seed whose lies were all withdrawn in time is timed from the telling
+        since = run["first_lie_due_s"] if due else run["first_lie_s"]
+        run["detection_delay_s"] = round(detected - since, 3) if lies and detected is not None else None
     return run
 
 

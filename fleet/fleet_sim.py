@@ -155,6 +155,7 @@ def simulate(scenario: Scenario, seed: int, sdf: SignedDistanceField | None = No
                      (np.zeros((0, 2)), np.zeros((0, 2))) for a in agents],
         plan_log=plan_log,
         first_lie_s=[a.liar.first_lie_at if a.liar else None for a in agents],
+        told=[list(a.liar.told) if a.liar else [] for a in agents],
     )
 
 

@@ -46,6 +46,8 @@ class RunRecord:
     first_lie_s: list = field(default_factory=list)
     """Per car: when it first published a plan false by more than plan_reject_m within
     what the audit holds it to (agent.attacks.Liar; liars only; None: never)."""
+    told: list = field(default_factory=list)
+    """Per car: (stamp, plan as published, lied) of every plan a liar published (Liar.told)."""
 
 
 def arrivals(scenario: Scenario, times: np.ndarray, states: np.ndarray) -> list[float | None]:

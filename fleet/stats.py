@@ -8,8 +8,13 @@ seeds; :func:`cell` reduces them to the numbers the tables print, each with its 
     detected_3s_rate  of the seeds in which the liar told a lie (a plan false by more than
                       plan_reject_m, a full transparency failure, within the 0.7 s the audit
                       holds a plan to), those in which every honest car trusted it 0.2 below every
-                      honest peer within 3 s of that first lie
-    detection_s       median time from that first lie to detection (seeds where detection
+                      honest peer within 3 s of the first lie that came due: the first moment
+                      the audit, seeing the truth, would find a claim still held beyond its
+                      tolerance (audit.first_false_claim). A lie withdrawn with notice never
+                      comes due; a seed whose lies all were is timed from the first telling
+    detected_3s_told_rate  the same, timed from the first lie told instead
+    withdrawn         seeds in which it lied but no lie came due
+    detection_s       median time from the first lie due to detection (seeds where detection
                       never happens are left out and counted apart; "-" where it never lied
                       beyond plan_reject_m)
     false_positive_rate  seeds in which an honest car's trust in an honest peer fell below 0.8
@@ -89,6 +94,9 @@ def cell(runs: list[dict]) -> dict:
         "median_clearance_m": estimate([r["liar_min_clearance"] for r in runs]),
         "lied_beyond_tolerance": len(lied),
         "detected_3s_rate": rate([d is not None and d <= DETECTION_LIMIT_S for d in delays]),
+        "detected_3s_told_rate": rate([d is not None and d <= DETECTION_LIMIT_S
+                                       for d in (r.get("detection_after_told_s") for r in lied)]),
+        "withdrawn": sum(1 for r in lied if r.get("first_lie_due_s") is None),
         "detection_s": estimate(delays),
         "never_detected": sum(1 for d in delays if d is None),
         "liar_distance_m": estimate([d for r in runs for d in r["liar_min_distance"]]),
