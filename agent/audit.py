@@ -23,6 +23,20 @@ one failure per plan in all (the worst graded miss so far, the increase recorded
 as it appears): a plan that comes true earns no second success, and a plan that does not
 costs as much as a plan that lied at once. A check whose moment has no observation (the
 peer was not seen then) is skipped.
+
+Lost notices. A plan is held to its word only until ``audit_notice_s`` after the next
+plan's stamp. When plan messages of the peer were lost (a gap in its sequence numbers),
+the next plan may have been among them, so the last plan received is held only until
+notice after the earliest stamp a lost plan could have had: one replan period
+(``control.replan_period_s``) after it. And until the next plan arrives, the checks of
+the newest plan beyond that point wait: whether its notice was lost is known only then
+(or after ``audit_horizon_s`` of silence, when the plan is held to its word; a peer
+silent for ``stale_after_s`` is kept at the widest epsilon long before). Without this,
+an honest car that changed its mind while its next few plans were lost (30 % loss: 4 in
+a row about once a minute per pair) is held to its old plan for seconds and distrusted.
+A liar that skips sequence numbers on purpose gains no more than by really replanning
+every period (a plan is then held for a period plus the notice anyway), and one that
+falls silent is held to its last plan after the silence.
 """
 
 from __future__ import annotations
@@ -55,6 +69,9 @@ class Claim:
     """Failure already recorded against this plan (at most 1)."""
     checked_now: bool = False
     """Whether lag 0 has been checked (the plan verified or refused)."""
+    lost_successor: float = np.inf
+    """The earliest stamp a plan of the peer's that we lost after this one could have had
+    (inf: none lost): that plan may have given notice of a change of mind."""
 
 
 @dataclass(frozen=True)
@@ -114,14 +131,22 @@ class Ledger:
     """The plans of one peer that still have something to say."""
 
     config: TrustConfig
+    replan_period_s: float = 0.0
+    """The fleet's: how soon after a plan its sender's next one can come."""
     claims: deque = field(default_factory=deque)
     dropped: int = 0
     """Claims pushed out unchecked by the memory bound."""
     unverifiable: int = 0
     """Claims whose stamp came with no observation of the peer to check it against."""
 
-    def add(self, plan: Plan, stamp: float, received: float) -> Claim:
+    def add(self, plan: Plan, stamp: float, received: float, lost_after: float | None = None) -> Claim:
+        """Keep ``plan`` (stamped ``stamp``, our clock) to check. ``lost_after``: plans of
+        the peer's were lost between the last one and this, the first of them stamped no
+        earlier than that -- the last plan is held only until it could have given notice."""
         c = self.config
+        if lost_after is not None and self.claims:
+            last = self.claims[-1]
+            last.lost_successor = min(last.lost_successor, max(lost_after, last.stamp))
         lags = np.arange(0.0, c.audit_horizon_s + 1e-9, c.audit_period_s)
         times = stamp + lags
         times = times[times <= max(plan.t_end, stamp)]
@@ -143,12 +168,22 @@ class Ledger:
         out = []
         claims = list(self.claims)
         for i, claim in enumerate(claims):
-            superseded = claims[i + 1].stamp + c.audit_notice_s if i + 1 < len(claims) else np.inf
+            heard = i + 1 < len(claims)
+            successor = min(claims[i + 1].stamp if heard else np.inf, claim.lost_successor)
+            superseded = successor + c.audit_notice_s
+            # Nothing heard after it yet: a next plan may be late or lost, and may have given
+            # notice. Beyond where that notice would reach, wait for it -- or for a silence
+            # as long as the audit's horizon, after which the plan is held to its word.
+            undecided = (claim.stamp + self.replan_period_s + c.audit_notice_s
+                         if not heard and successor == np.inf
+                         and track.last_stamp - claim.received < c.audit_horizon_s else np.inf)
             start = end = claim.next
             done = False
             while end < len(claim.times) and claim.times[end] <= (now_reach if end == 0 else late_reach):
                 if end > 0 and claim.times[end] > superseded:  # a newer plan gave notice of any change
                     done = True
+                    break
+                if end > 0 and claim.times[end] > undecided:
                     break
                 end += 1
             claim.next = len(claim.times) if done else end

@@ -31,7 +31,14 @@ How peers' plans are used (agent.evidence; docs/architecture.md, "Trust"):
   car that failed to say what it did (loss and delay cost honest cars no trust). A
   window in which the proximity guard (agent.guard), fed the poses we see, would have
   held the peer below its plan's speed is no evidence either way: every honest car's
-  guard slows it unannounced when another car or a wall comes close ahead.
+  guard slows it unannounced when another car or a wall comes close ahead. A failure in
+  a window in which a plan of the peer's was lost (a gap in its sequence numbers) that
+  could have told the change is not recorded either (counted): an honest car's notice
+  lost in the network is not its fault; successes still count, so loss does not leave a
+  peer at the prior. A liar that skips sequence numbers on purpose escapes consistency
+  failures that way -- it still meets the check at the stamp and the audit (held a
+  period plus the notice), and the margin and the guard bound the rest (README,
+  false-yield).
 
 A liar (``car.attack``, agent.attacks) plans and drives like everyone else and lies in
 what it publishes.
@@ -160,7 +167,7 @@ class CarAgent:
 
     def view(self, peer: int) -> PeerView:
         if peer not in self.peers:
-            self.peers[peer] = PeerView(self.scenario.trust)
+            self.peers[peer] = PeerView(self.scenario.trust, self.scenario.control.replan_period_s)
         return self.peers[peer]
 
     def _recorder(self, peer: int, now: float):
@@ -206,8 +213,11 @@ class CarAgent:
                 mismatch = _acceleration_mismatch(view, self.scenario.control.replan_period_s + REPLAN_MARGIN_S,
                                                   now - config.stale_after_s)
                 if mismatch is not None:
-                    s, f = graded(mismatch, config.consistency_tolerance_mps2)
-                    self.trust.record(peer, CONSISTENCY, s, f, now)
+                    s, f = graded(mismatch[0], config.consistency_tolerance_mps2)
+                    if f > 0 and _notice_lost(view, *mismatch[1:]):
+                        self.counters["consistency_excused_by_loss"] += 1
+                    else:
+                        self.trust.record(peer, CONSISTENCY, s, f, now)
 
     def _guard_holds(self, peer: int, motion, motions: dict, view: PeerView) -> bool:
         """Would the proximity guard (agent.guard), fed the poses we see, hold ``peer``
@@ -424,8 +434,14 @@ class CarAgent:
         return self.trust.trust(peer, now)
 
 
-def _acceleration_mismatch(view: PeerView, fresh_s: float, until: float) -> float | None:
-    """|mean observed - mean announced acceleration| over the CONSISTENCY_WINDOW_S that
+def _notice_lost(view: PeerView, t_old: float, t: float) -> bool:
+    """Could a plan of the peer's that we lost have told a change of mind in the window
+    from ``t_old`` to ``t`` (stamped after it began, ANNOUNCED_MIN_S before it ended)?"""
+    return any(earliest <= t - ANNOUNCED_MIN_S and latest > t_old for earliest, latest in view.lost)
+
+
+def _acceleration_mismatch(view: PeerView, fresh_s: float, until: float) -> tuple[float, float, float] | None:
+    """(|mean observed - mean announced acceleration|, window start, window end) over the CONSISTENCY_WINDOW_S that
     ends at the last observation at or before ``until``, the announcement being the newest
     accepted plan the peer had made when the window began (by its stamp: a plan that
     arrived late still tells what the peer meant then); None if that plan is older than
@@ -459,7 +475,7 @@ def _acceleration_mismatch(view: PeerView, fresh_s: float, until: float) -> floa
         then = min(view.velocities, key=lambda tv: abs(tv[0] - stamp))
         if abs(then[0] - stamp) <= 0.5 * ANNOUNCED_MIN_S:
             mismatch = min(mismatch, _mismatch(plan, then[0], then[1], t, observed))
-    return mismatch
+    return mismatch, t_old, t
 
 
 def _mismatch(plan, t_old: float, observed_old: np.ndarray, t: float, observed: np.ndarray) -> float:

@@ -54,6 +54,8 @@ class PeerView:
     """What we know of one peer."""
 
     config: TrustConfig
+    replan_period_s: float = 0.0
+    """The fleet's (control.replan_period_s): how soon after a plan the peer's next can come."""
     latest: PlanMessage | None = None
     latest_received: float = -np.inf
     accepted: Plan | None = None
@@ -70,6 +72,9 @@ class PeerView:
     """Evidence ticks (t) at which the proximity guard, as we see the fleet, held the peer
     below the speed its plan announced (agent.guard): what it did then is no evidence of
     consistency either way."""
+    lost: deque = field(default_factory=lambda: deque(maxlen=32))
+    """(earliest, latest) stamp (our clock) a plan of the peer's that we lost could have
+    had, from gaps in its sequence numbers: a change of mind may have been told there."""
     history: deque = field(default_factory=lambda: deque(maxlen=32))
     """(stamp, plan) of the plans accepted lately, in order of arrival (our clock)."""
     clock: ClockEstimate = field(init=False)
@@ -79,7 +84,7 @@ class PeerView:
 
     def __post_init__(self) -> None:
         self.clock = ClockEstimate(self.config.clock_window_s, self.config.clock_tolerance_s)
-        self.ledger = Ledger(self.config)
+        self.ledger = Ledger(self.config, self.replan_period_s)
 
     def accept(self, plan: Plan, stamp: float, received: float) -> None:
         self.accepted, self.accepted_received, self.accepted_stamp = plan, received, stamp
@@ -97,6 +102,8 @@ def take_plan(view: PeerView, message: PlanMessage, now: float, track: Track | N
               counters: Counter) -> None:
     """A plan message from the peer arrived at ``now`` (our clock)."""
     config = view.config
+    previous = view.latest
+    lost = previous is not None and message.seq > previous.seq + 1
     view.latest, view.latest_received, view.goal = message, now, message.goal
     view.clock.add(message.stamp, now)
     if config.reject_plans and message.stamp - now > config.clock_tolerance_s:
@@ -108,7 +115,11 @@ def take_plan(view: PeerView, message: PlanMessage, now: float, track: Track | N
     if now - stamp > config.stale_after_s:
         counters["plans_too_late"] += 1  # delayed in the network: no use, no evidence
         return
-    view.ledger.add(plan, stamp, now)
+    lost_after = view.clock.to_ours(previous.stamp) + view.replan_period_s if lost else None
+    if lost_after is not None:
+        counters["plans_lost_seen"] += 1
+        view.lost.append((lost_after, stamp))
+    view.ledger.add(plan, stamp, now, lost_after=lost_after)
     if config.reject_plans:
         view.unverified, view.unverified_received = plan, now
     else:
