@@ -93,15 +93,17 @@ def tolerance(lag_s, config: TrustConfig):
     return config.transparency_tolerance_m + lag_s * config.audit_tolerance_growth_mps
 
 
-def reject_threshold(lag_s: float, config: TrustConfig) -> float:
+def reject_threshold(lag_s, config: TrustConfig):
     return config.plan_reject_m + lag_s * config.audit_tolerance_growth_mps
 
 
-def first_false_claim(told: list[tuple[float, Plan, bool]], truth_at, config: TrustConfig) -> float | None:
+def first_false_claim(told: list[tuple[float, Plan, bool]], truth_at, config: TrustConfig,
+                      after: float = -np.inf) -> float | None:
     """When a lie first came due: the earliest audit time (a stamp plus a multiple of
     ``audit_period_s``, within ``audit_horizon_s``, before the next plan's notice ran out)
-    at which a plan told as a lie (``told``: (stamp, plan, lied), in order) put its car
-    beyond tolerance(lag) from where it truly was (``truth_at(times) -> (k, 2)``). The
+    not before ``after`` at which a plan told as a lie (``told``: (stamp, plan, lied), in
+    order) put its car beyond tolerance(lag) from where it truly was (``truth_at(times) ->
+    (k, 2)``): the first evidence the audit could have recorded. The
     Ledger's rules with the truth in place of a track: the moment an observer who saw
     everything could first have caught it. A lie withdrawn with notice never comes due.
     None: no lie did."""
@@ -113,7 +115,7 @@ def first_false_claim(told: list[tuple[float, Plan, bool]], truth_at, config: Tr
         superseded = told[i + 1][0] + c.audit_notice_s if i + 1 < len(told) else np.inf
         lags = np.arange(0.0, c.audit_horizon_s + 1e-9, c.audit_period_s)
         times = stamp + lags
-        times = times[(times <= max(plan.t_end, stamp)) & ((lags < 1e-9) | (times <= superseded))]
+        times = times[(times <= max(plan.t_end, stamp)) & ((lags < 1e-9) | (times <= superseded)) & (times >= after)]
         misses = np.linalg.norm(plan.position_at(times) - truth_at(times), axis=1)
         false = times[misses > tolerance(times - stamp, c)]
         if len(false) and (first is None or false[0] < first):

@@ -204,14 +204,15 @@ def summarise(scenario: Scenario, record: RunRecord) -> dict:
         run["trust_detected_at_s"] = None if None in detected else max(detected)
         lies = [record.first_lie_s[i] for i in liars if record.first_lie_s and record.first_lie_s[i] is not None]
         run["first_lie_s"] = round(float(min(lies)), 3) if lies else None
-        due = [first_false_claim(record.told[i], _truth(record, i), scenario.trust)
-               for i in liars if record.told and record.told[i]]
+        due = [first_false_claim(record.told[i], _truth(record, i), scenario.trust, after=record.first_lie_s[i])
+               for i in liars if record.told and record.told[i] and record.first_lie_s[i] is not None]
         due = [t for t in due if t is not None]
         run["first_lie_due_s"] = round(min(due), 3) if due else None
         detected = run["trust_detected_at_s"]
         run["detection_after_told_s"] = round(detected - run["first_lie_s"], 3) if lies and detected is not None else None
-        # timed from the first lie that came due, when any observer could first catch it;
-        # a seed whose lies were all withdrawn in time is timed from the telling
+        # timed from when, after its first lie (beyond plan_reject_m), a false claim of it
+        # first came due beyond the tolerance: the first evidence any observer could have.
+        # A seed whose lies were all withdrawn in time is timed from the telling.
         since = run["first_lie_due_s"] if due else run["first_lie_s"]
         run["detection_delay_s"] = round(detected - since, 3) if lies and detected is not None else None
     return run

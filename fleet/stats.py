@@ -8,10 +8,11 @@ seeds; :func:`cell` reduces them to the numbers the tables print, each with its 
     detected_3s_rate  of the seeds in which the liar told a lie (a plan false by more than
                       plan_reject_m, a full transparency failure, within the 0.7 s the audit
                       holds a plan to), those in which every honest car trusted it 0.2 below every
-                      honest peer within 3 s of the first lie that came due: the first moment
-                      the audit, seeing the truth, would find a claim still held beyond its
-                      tolerance (audit.first_false_claim). A lie withdrawn with notice never
-                      comes due; a seed whose lies all were is timed from the first telling
+                      honest peer within 3 s of the moment, after that first lie, at which a
+                      false claim of it first came due: the audit, seeing the truth, would find
+                      a claim still held beyond its tolerance (audit.first_false_claim), the
+                      first evidence any observer could have. A lie withdrawn with notice
+                      never comes due; a seed whose lies all were is timed from the telling
     detected_3s_told_rate  the same, timed from the first lie told instead
     withdrawn         seeds in which it lied but no lie came due
     detection_s       median time from the first lie due to detection (seeds where detection

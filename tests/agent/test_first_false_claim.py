@@ -9,7 +9,7 @@ from trustfg.agent.audit import first_false_claim
 from trustfg.agent.config import TrustConfig
 from trustfg.agent.gp import Plan
 
-CONFIG = TrustConfig()  # tolerance 0.15 m + 0.15 m/s of lag, notice 0.5 s, every 0.2 s for 3 s
+CONFIG = TrustConfig()  # tolerance 0.15 m + 0.15 m/s of lag; notice 0.5 s; every 0.2 s for 3 s
 
 
 def standing(at=(0.0, 0.0), t0=0.0) -> Plan:
@@ -17,9 +17,9 @@ def standing(at=(0.0, 0.0), t0=0.0) -> Plan:
 
 
 def leaving(t0=0.0) -> Plan:
-    """Stands for 1 s, then drives +x at 0.4 m/s."""
-    x = np.r_[0.0, 0.0, 0.0, 0.2 * np.arange(1, 7)]
-    return Plan(t0, 0.5, np.c_[x, np.zeros(9)], np.c_[np.r_[0, 0, 0, [0.4] * 6], np.zeros(9)])
+    """Stands for 1 s, then drives +x at 0.6 m/s."""
+    x = np.r_[0.0, 0.0, 0.0, 0.3 * np.arange(1, 7)]
+    return Plan(t0, 0.5, np.c_[x, np.zeros(9)], np.c_[np.r_[0, 0, 0, [0.6] * 6], np.zeros(9)])
 
 
 def at_rest(times):
@@ -32,11 +32,11 @@ def test_a_displaced_plan_comes_due_at_its_stamp():
 
 
 def test_a_false_future_comes_due_when_its_time_comes_if_it_is_still_held():
-    """Says it leaves at 1 s at 0.4 m/s, stays: the claim 0.4 (t - 1) m ahead of a car
-    that never moved passes the tolerance 0.15 + 0.15 t m after t = 2.2 s."""
+    """Says it leaves at 1 s at 0.6 m/s, stays: the claim 0.6 (t - 1) m ahead of a car
+    that never moved passes the tolerance 0.15 + 0.15 t m after t = 1.67 s."""
     told = [(0.0, leaving(), True)]
     due = first_false_claim(told, at_rest, CONFIG)
-    assert due is not None and 2.2 <= due <= 2.4 + 1e-9
+    assert due is not None and 1.6 <= due <= 1.8 + 1e-9
     lag = due
     assert np.linalg.norm(leaving().position_at(due)[0]) > CONFIG.transparency_tolerance_m + lag * CONFIG.audit_tolerance_growth_mps
 
@@ -51,3 +51,8 @@ def test_a_lie_withdrawn_with_notice_never_comes_due_and_would_without_the_notic
 def test_a_truthful_plan_is_never_a_lie_even_when_it_misses():
     told = [(0.0, leaving(), False)]  # an honest change of mind: not the liar's lie
     assert first_false_claim(told, at_rest, CONFIG) is None
+
+
+def test_nothing_before_the_first_lie_counts():
+    told = [(0.0, leaving(), True)]
+    assert first_false_claim(told, at_rest, CONFIG, after=2.5) == 2.6
