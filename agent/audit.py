@@ -99,14 +99,14 @@ def reject_threshold(lag_s, config: TrustConfig):
 
 def first_false_claim(told: list[tuple[float, Plan, bool]], truth_at, config: TrustConfig,
                       after: float = -np.inf) -> float | None:
-    """When a lie first came due: the earliest audit time (a stamp plus a multiple of
-    ``audit_period_s``, within ``audit_horizon_s``, before the next plan's notice ran out)
-    not before ``after`` at which a plan told as a lie (``told``: (stamp, plan, lied), in
-    order) put its car beyond tolerance(lag) from where it truly was (``truth_at(times) ->
-    (k, 2)``): the first evidence the audit could have recorded. The
-    Ledger's rules with the truth in place of a track: the moment an observer who saw
-    everything could first have caught it. A lie withdrawn with notice never comes due.
-    None: no lie did."""
+    """When a lie first came due: the earliest audit time, not before ``after``, at which a
+    plan told as a lie put its car beyond tolerance(lag) from where it truly was -- the
+    first evidence the audit could have recorded. The Ledger's rules (a stamp plus a
+    multiple of ``audit_period_s``, within ``audit_horizon_s``, until the next plan's
+    notice ran out) with the truth in place of a track: the moment an observer who heard
+    and saw everything could first have caught it. A lie withdrawn with notice never comes
+    due. ``told``: (stamp, plan, lied) in order of publication; ``truth_at(times)`` ->
+    (k, 2) true positions. None: no lie came due."""
     c = config
     first = None
     for i, (stamp, plan, lied) in enumerate(told):

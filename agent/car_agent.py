@@ -441,8 +441,9 @@ def _notice_lost(view: PeerView, t_old: float, t: float) -> bool:
 
 
 def _acceleration_mismatch(view: PeerView, fresh_s: float, until: float) -> tuple[float, float, float] | None:
-    """(|mean observed - mean announced acceleration|, window start, window end) over the CONSISTENCY_WINDOW_S that
-    ends at the last observation at or before ``until``, the announcement being the newest
+    """(|mean observed - mean announced acceleration|, window start, window end) over the
+    CONSISTENCY_WINDOW_S that ends at the last observation at or before ``until``, the
+    announcement being the newest
     accepted plan the peer had made when the window began (by its stamp: a plan that
     arrived late still tells what the peer meant then); None if that plan is older than
     ``fresh_s`` then or there are not enough observations yet. The caller judges a
