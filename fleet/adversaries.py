@@ -137,8 +137,8 @@ def table(summary: dict, title: str) -> str:
                              f"{c['breach_seeds']}/{c['runs']} ({stats.show(c['breach_rate'], 0, True)})",
                              f"{c['min_clearance_m']:.3f}", stats.show(c["detected_3s_rate"], 0, True)
                              + (f" ({c['withdrawn']} withdrawn)" if c.get("withdrawn") else ""),
-                             stats.show(c.get("detected_3s_told_rate"), 0, True), stats.show(c["detection_s"], 1) + never, stats.show(c["false_positive_rate"], 0, True),
-                             makespan])
+                             stats.show(c.get("detected_3s_told_rate"), 0, True), stats.show(c["detection_s"], 1) + never,
+                             stats.show(c["false_positive_rate"], 0, True), makespan])
     return stats.markdown(title, ["scene", "attack", "fleet", "honest-liar breaches (seeds)", "least clearance (m)",
                                   "detected within 3 s of the first lie due",
                                   "... of the first lie told", "detection (s), median", "false positives",
