@@ -117,7 +117,7 @@ def take_plan(view: PeerView, message: PlanMessage, now: float, track: Track | N
         return
     lost_after = view.clock.to_ours(previous.stamp) + view.replan_period_s if lost else None
     if lost_after is not None:
-        counters["plans_lost_seen"] += 1
+        counters["peer_plans_lost"] += 1
         view.lost.append((lost_after, stamp))
     view.ledger.add(plan, stamp, now, lost_after=lost_after)
     if config.reject_plans:
