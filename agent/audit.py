@@ -97,6 +97,13 @@ def reject_threshold(lag_s, config: TrustConfig):
     return config.plan_reject_m + lag_s * config.audit_tolerance_growth_mps
 
 
+def check_times(plan: Plan, stamp: float, config: TrustConfig) -> np.ndarray:
+    """The times (ours) a plan stamped ``stamp`` is checked at: its stamp, then every
+    ``audit_period_s`` up to ``audit_horizon_s``, no later than the plan's end."""
+    times = stamp + np.arange(0.0, config.audit_horizon_s + 1e-9, config.audit_period_s)
+    return times[times <= max(plan.t_end, stamp)]
+
+
 def first_false_claim(told: list[tuple[float, Plan, bool]], truth_at, config: TrustConfig,
                       after: float = -np.inf) -> float | None:
     """When a lie first came due: the earliest audit time, not before ``after``, at which a
@@ -113,9 +120,8 @@ def first_false_claim(told: list[tuple[float, Plan, bool]], truth_at, config: Tr
         if not lied:
             continue
         superseded = told[i + 1][0] + c.audit_notice_s if i + 1 < len(told) else np.inf
-        lags = np.arange(0.0, c.audit_horizon_s + 1e-9, c.audit_period_s)
-        times = stamp + lags
-        times = times[(times <= max(plan.t_end, stamp)) & ((lags < 1e-9) | (times <= superseded)) & (times >= after)]
+        times = check_times(plan, stamp, c)
+        times = times[((times == stamp) | (times <= superseded)) & (times >= after)]
         misses = np.linalg.norm(plan.position_at(times) - truth_at(times), axis=1)
         false = times[misses > tolerance(times - stamp, c)]
         if len(false) and (first is None or false[0] < first):
@@ -149,9 +155,7 @@ class Ledger:
         if lost_after is not None and self.claims:
             last = self.claims[-1]
             last.lost_successor = min(last.lost_successor, max(lost_after, last.stamp))
-        lags = np.arange(0.0, c.audit_horizon_s + 1e-9, c.audit_period_s)
-        times = stamp + lags
-        times = times[times <= max(plan.t_end, stamp)]
+        times = check_times(plan, stamp, c)
         claim = Claim(plan, stamp, received, times, plan.position_at(times))
         self.claims.append(claim)
         while len(self.claims) > c.audit_max_plans:
