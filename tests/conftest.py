@@ -34,11 +34,6 @@ def intersection_sdf(intersection):
     return build_sdf(intersection.world)
 
 
-def free_tcp_port() -> int:
-    """A TCP port nobody listens on right now, outside the ephemeral range (fleet.ports)."""
-    return free_port()
-
-
 def wait_for(predicate, timeout: float = 5.0, interval: float = 0.01) -> bool:
     """Poll a condition until it holds or the deadline passes (no fixed sleeps)."""
     deadline = time.monotonic() + timeout
@@ -141,10 +136,6 @@ def _readlink(path: Path) -> str:
 _groups = itertools.count(1)
 
 
-def free_udp_port() -> int:
-    return free_port(socket.SOCK_DGRAM)
-
-
 def next_multicast_group() -> str:
     """A group of its own per test and per process, so parallel runs do not cross-talk."""
     return f"239.253.{1 + os.getpid() % 250}.{1 + next(_groups) % 250}"
@@ -153,7 +144,7 @@ def next_multicast_group() -> str:
 @pytest.fixture(scope="session")
 def multicast_loopback() -> None:
     """Skip (naming the OS error) unless multicast on the loopback interface works here."""
-    group, port = next_multicast_group(), free_udp_port()
+    group, port = next_multicast_group(), free_port(socket.SOCK_DGRAM)
     rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     try:
@@ -175,4 +166,4 @@ def multicast_loopback() -> None:
 
 @pytest.fixture
 def multicast_group(multicast_loopback) -> tuple[str, int]:
-    return next_multicast_group(), free_udp_port()
+    return next_multicast_group(), free_port(socket.SOCK_DGRAM)

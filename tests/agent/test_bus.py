@@ -3,23 +3,25 @@
 import contextlib
 import json
 import math
+import socket
 import time
 
 import numpy as np
 import pytest
 
-from tests.conftest import free_tcp_port, free_udp_port, wait_for
+from tests.conftest import wait_for
 from trustfg.agent import messages
 from trustfg.agent.config import BusConfig
 from trustfg.agent.gp import Plan
 from trustfg.fleet.bus import BusError, FleetBus, zenoh_config
 from trustfg.fleet.keys import parse_key
+from trustfg.fleet.ports import free_port
 
 FLEET = "t"
 
 
 def endpoint():
-    return f"tcp/127.0.0.1:{free_tcp_port()}"
+    return f"tcp/127.0.0.1:{free_port()}"
 
 
 def pose(sender, seq):
@@ -49,7 +51,7 @@ def test_messages_flow_between_two_cars_and_the_sender_comes_from_the_key():
 
 
 def udp_endpoint():
-    return f"udp/127.0.0.1:{free_udp_port()}?rel=0"
+    return f"udp/127.0.0.1:{free_port(socket.SOCK_DGRAM)}?rel=0"
 
 
 def test_with_a_udp_endpoint_peers_get_a_best_effort_link_and_plans_arrive():
@@ -299,7 +301,7 @@ def test_zenoh_receives_on_as_many_threads_as_the_bus_asks_unless_told_otherwise
     env = {k: v for k, v in os.environ.items() if k != "ZENOH_RUNTIME"}
     if preset is not None:
         env["ZENOH_RUNTIME"] = preset
-    probe = RX_THREADS_PROBE.format(a=free_tcp_port(), b=free_tcp_port())
+    probe = RX_THREADS_PROBE.format(a=free_port(), b=free_port())
     out = subprocess.run([sys.executable, "-c", probe], env=env, capture_output=True, text=True, timeout=60)
     assert out.returncode == 0, out.stderr
     assert int(out.stdout.strip().splitlines()[-1]) == (threads or RX_THREADS)

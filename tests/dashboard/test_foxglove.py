@@ -18,12 +18,13 @@ from mcap.reader import make_reader
 from mcap_protobuf.decoder import DecoderFactory
 from websockets.sync.client import connect
 
-from tests.conftest import free_tcp_port, wait_for
+from tests.conftest import wait_for
 from trustfg.agent import messages
 from trustfg.agent.config import BusConfig
 from trustfg.agent.gp import Plan
 from trustfg.dashboard.foxglove_live import FoxgloveLive
 from trustfg.fleet.bus import FleetBus
+from trustfg.fleet.ports import free_port
 from trustfg.fleet.recording import McapRecorder, read_recording
 
 T0 = 1_700_000_000.0
@@ -94,10 +95,10 @@ def protobuf_class(channel: dict):
 
 
 def test_a_foxglove_websocket_client_receives_a_cars_pose(intersection):
-    car_endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    car_endpoint = f"tcp/127.0.0.1:{free_port()}"
     fleet = dataclasses.replace(intersection, bus=BusConfig(connect=(car_endpoint,)))
     with FleetBus(BusConfig(listen=(car_endpoint,)), fleet.fleet, 3) as car, \
-            FoxgloveLive(fleet, port=0, listen=(f"tcp/127.0.0.1:{free_tcp_port()}",)) as live:
+            FoxgloveLive(fleet, port=0, listen=(f"tcp/127.0.0.1:{free_port()}",)) as live:
         with connect(f"ws://127.0.0.1:{live.port}", subprotocols=["foxglove.sdk.v1", "foxglove.websocket.v1"],
                      open_timeout=5) as ws:
             assert ws.subprotocol == "foxglove.sdk.v1"  # the SDK's name for foxglove.websocket.v1
