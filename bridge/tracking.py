@@ -87,5 +87,10 @@ def turn_on_the_spot(plan: Plan, t: float, x: float, y: float, yaw: float, gains
         heading = math.atan2(p_ref[1] - y, p_ref[0] - x)
     else:
         return 0.0
+    return turn_towards(heading, yaw, gains, limits)
+
+
+def turn_towards(heading: float, yaw: float, gains: TrackingConfig, limits: VehicleConfig) -> float:
+    """The turn rate, standing, from ``yaw`` towards ``heading``: k_heading (heading - yaw), capped."""
     return _clamp(0.0, gains.k_heading * wrap(heading - yaw), limits)[1]
 

@@ -15,6 +15,7 @@ import math
 
 from ..agent.car_agent import CarAgent
 from ..agent.config import CarConfig, Scenario, TrackingConfig, VehicleConfig
+from ..bridge.tracking import turn_towards
 
 
 def leg(car: CarConfig, lap: int) -> CarConfig:
@@ -59,11 +60,14 @@ class Laps:
         self._turn_until = now + self.turn_s
         return True
 
+    @property
+    def turn(self) -> tuple[float, float]:
+        """(heading, until): the turn between laps towards ``heading`` lasts until ``until``
+        (fleet clock; -inf: no turn) -- what the command loop needs of the laps."""
+        return self._heading, self._turn_until
+
     def turn_command(self, now: float, yaw: float, gains: TrackingConfig,
                      limits: VehicleConfig) -> tuple[float, float] | None:
         """(0, omega) towards the next leg while the turn lasts, else None."""
-        if now >= self._turn_until:
-            return None
-        error = math.atan2(math.sin(self._heading - yaw), math.cos(self._heading - yaw))
-        omega = max(-limits.max_turn_rate_radps, min(limits.max_turn_rate_radps, gains.k_heading * error))
-        return 0.0, omega
+        heading, until = self.turn
+        return None if now >= until else (0.0, turn_towards(heading, yaw, gains, limits))
