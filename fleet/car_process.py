@@ -5,15 +5,17 @@ Threads, each owning what it touches:
 * the NatNet client's socket thread hands every frame to a queue (and keeps the latest
   pose of every rigid body);
 * Zenoh's callbacks hand every fleet message to the bus queue (trustfg.fleet.bus);
-* the control thread, at ``control.command_rate_hz`` on absolute deadlines from the
-  moment the process starts, reads the car's own latest pose and the current plan and
-  sends one command datagram: the tracking command, or STOP when there is no fresh pose
-  (older than ``control.pose_timeout_s``, or no Motive yet), no plan, or the operator's
-  protocol (agent.operation: waiting, arrived, e-stopped, before the departure, deadman)
-  does not let the car drive; E_STOP while e-stopped, RELEASE after a release. The
-  tracking speed is capped by the proximity guard (agent.guard) against the other cars
-  it sees and the walls of the map. Every ``control.link_ping_period_s`` it PINGs the car
-  and reads the answers (the link is up; the car's e-stop latch);
+* the command loop, a process of its own (fleet.command_loop), at
+  ``control.command_rate_hz`` on absolute deadlines from the moment the process starts,
+  reads the car's own latest pose (its own NatNet client) and the current plan and sends
+  one command datagram: the tracking command, or STOP when there is no fresh pose (older
+  than ``control.pose_timeout_s``, or no Motive yet), no plan, or the operator's protocol
+  (agent.operation: waiting, arrived, e-stopped, before the departure, deadman) does not
+  let the car drive; E_STOP while e-stopped, RELEASE after a release. The tracking speed
+  is capped by the proximity guard (agent.guard) against the other cars it sees and the
+  walls of the map. It PINGs the car and reads the answers (the link is up; the car's
+  e-stop latch). It drives only on a *permit* this process renews on every pass of its
+  main loop, valid for ``control.lease_s``: an agent that hangs or dies stops its car;
 * the main thread runs the agent: it drains frames and messages, hands the operator's
   messages to the :class:`~trustfg.agent.operation.Operation`, gathers evidence, replans
   every ``control.replan_period_s`` and publishes plan, trust, pose and status (at once
@@ -27,10 +29,10 @@ that changes -- and retries (NatNet from a connector thread, the bus every
 A car that does not move although it is told to is *stuck* (bridge.motion_watch): the
 process keeps commanding its plan but tells its peers the truth, a plan that stands still.
 
-The planner (GTSAM, numpy) holds the GIL while it works; the control thread is kept
-responsive by a short interpreter switch interval, and its timing (command rate, jitter)
-is measured and reported. SIGTERM or SIGINT stops the loops, sends STOP to the car, and
-closes every socket and session. ``--stats FILE`` writes a JSON summary at exit.
+The planner (GTSAM, numpy) holds this interpreter's lock while it works; the command loop
+has an interpreter of its own (and real-time priority where the OS grants it), and its
+timing (command rate, lateness) is measured and reported. SIGTERM or SIGINT stops the
+loops, has the command loop send STOP to the car, and closes every socket and session. ``--stats FILE`` writes a JSON summary at exit.
 
 The car is chosen by addresses in the config (its NatNet server, its ``link``), never by
 a simulation switch: the same process drives a real car or one of mocap_sim's.
@@ -41,7 +43,6 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-import sys
 import threading
 import time
 from collections import Counter, deque
@@ -51,27 +52,19 @@ from ..agent import messages
 from ..agent.car_agent import CarAgent
 from ..agent.config import CarConfig, ConfigError, Scenario
 from ..agent.gp import standing
-from ..agent.guard import reaction_time
 from ..agent.operation import Mode, Operation
 from ..agent.scenario_files import load_scenario
 from ..agent.world import build_sdf
 from ..bridge import natnet
-from ..bridge.carlink import SOURCE_CAR_PROCESS, Answer, CommandSender, Flags, link_key
-from ..bridge.drive import drive
-from ..bridge.motion_watch import MotionWatch
+from ..bridge.carlink import link_key
 from ..bridge.natnet_client import NatNetClient, NatNetConnectionError, client_options
 from .bus import BusError, FleetBus, Received, zenoh_config
-from .car_report import ControlStats, WaitingLog, status_counters, waiting_for, write_stats
+from .car_report import WaitingLog, status_counters, waiting_for, write_stats
 from .command import command_parser, configured, stop_on_signals
+from .command_loop import CommandProcess, Report
 from .laps import Laps
-from .ticker import ticks
 
 log = logging.getLogger(__name__)
-
-SWITCH_INTERVAL_S = 0.001
-GAP_WINDOW_S = 5.0
-"""The guard's command hold is the longest gap between control ticks over this window: a
-process that stalled lately is taken to stall again (tests/agent/test_guard.py)."""
 
 
 class CarProcess:
@@ -96,23 +89,21 @@ class CarProcess:
         self.sdf = build_sdf(scenario.world)
         self.agent = self._new_agent()
         self.operation = Operation(car.id, scenario.operator)
-        self._operation_lock = threading.Lock()  # the main and the control thread both use it
         self.inbox = messages.Inbox()
         self.frames: deque = deque(maxlen=4096)
         self.counters: Counter = Counter()
-        self.control = ControlStats()
+        self.command = CommandProcess(scenario, car)
+        self.command_report = Report()
+        self.stuck = False
         self.state = Mode.WAITING.value
         self._natnet: NatNetClient | None = None  # set by the connector thread once Motive answers
         self._natnet_problem = "connecting"
-        self._link_answered = -math.inf  # when the car last answered a PING (fleet clock)
-        self._car_latched = False
         self._waiting = WaitingLog(car.id)
-        self._plan = None  # what the control thread follows (swapped atomically)
+        self._plan = None  # what the command loop follows
         self._last_plans: dict[int, tuple[messages.PlanMessage, float]] = {}
         self._bodies = {c.body_id: c.id for c in scenario.cars}
         self._seq: Counter = Counter()
         self._alive: dict[int, bool] = {}
-        self.motion = MotionWatch()  # is the car stuck?
         self.laps = Laps(car, scenario.control.laps, scenario.control.lap_turn_s)
 
     def _new_agent(self) -> CarAgent:
@@ -146,17 +137,15 @@ class CarProcess:
         if message is None:
             return
         if isinstance(message, messages.HeartbeatMessage):
-            with self._operation_lock:
-                unheard_start = self.operation.heard_operator(received.at)
+            unheard_start = self.operation.heard_operator(received.at)
             if unheard_start is not None:
                 self._start(unheard_start)
         elif isinstance(message, messages.StartMessage):
             self._start(message)
         elif isinstance(message, messages.StopMessage):
-            with self._operation_lock:
-                changed = self.operation.take_stop(message, self.clock())
-            if changed:
+            if self.operation.take_stop(message, self.clock()):
                 log.warning("car %d: %s", self.car.id, self.operation.reason)
+                self._feed_command_loop(self.clock())  # an e-stop goes out now, not after the pass
         elif isinstance(message, (messages.PlanMessage, messages.TrustReport)):
             self.agent.receive(message, received.at)
             if isinstance(message, messages.PlanMessage):
@@ -165,34 +154,32 @@ class CarProcess:
     def _start(self, message: messages.StartMessage | None) -> None:
         """A start from the operator (None: ``control.start_timeout_s`` ran out)."""
         now = self.clock()
-        with self._operation_lock:
-            if message is None:
-                self.operation.take_start_without_operator(now, self.scenario.planner.cruise_speed_mps)
-                taken = True
-            else:
-                before = self.operation.reason
-                taken = self.operation.take_start(message, now)
-                if not taken and self.operation.reason != before:
-                    log.warning("car %d: %s", self.car.id, self.operation.reason)
-            if not taken:
-                return
-            depart, cruise = self.operation.depart_at, self.operation.cruise_mps
-            self._plan = None
-            agent = self._new_agent()
-            agent.number_on_from(self.agent)
-            agent.set_departure(depart, cruise)
-            for plan, at in self._last_plans.values():  # what the peers intend, as last heard
-                agent.receive(plan, at)
-            self.agent = agent
-            self.laps = Laps(self.car, self.scenario.control.laps, self.scenario.control.lap_turn_s)
-            self.motion.clear()
+        if message is None:
+            self.operation.take_start_without_operator(now, self.scenario.planner.cruise_speed_mps)
+            taken = True
+        else:
+            before = self.operation.reason
+            taken = self.operation.take_start(message, now)
+            if not taken and self.operation.reason != before:
+                log.warning("car %d: %s", self.car.id, self.operation.reason)
+        if not taken:
+            return
+        depart, cruise = self.operation.depart_at, self.operation.cruise_mps
+        self._plan = None
+        agent = self._new_agent()
+        agent.number_on_from(self.agent)
+        agent.set_departure(depart, cruise)
+        for plan, at in self._last_plans.values():  # what the peers intend, as last heard
+            agent.receive(plan, at)
+        self.agent = agent
+        self.laps = Laps(self.car, self.scenario.control.laps, self.scenario.control.lap_turn_s)
+        self.stuck = False  # the command loop's motion watch starts afresh with the trial
         log.info("car %d: trial %d: start at %.2f (in %.2f s), cruise %.2f m/s", self.car.id,
                  self.operation.trial, depart, depart - now, cruise)
 
-    # --- the control thread -----------------------------------------------------------------
-
     def _own_pose(self) -> tuple[tuple[float, float, float], float] | None:
-        """The car's own fresh, tracked pose (x, y, yaw) and its age in seconds."""
+        """The car's own fresh, tracked pose (x, y, yaw) and its age in seconds (the
+        command loop reads its own; this one is for the bus and for what we wait for)."""
         natnet_client = self._natnet
         sample = natnet_client.latest(self.car.body_id) if natnet_client is not None else None
         if sample is None or not sample.body.tracking_valid:
@@ -203,123 +190,56 @@ class CarProcess:
         return natnet.to_ground_plane(sample.body.position, sample.body.orientation,
                                       self.scenario.natnet.up_axis), age
 
-    def _others_seen(self) -> list[tuple[float, float, float, float]]:
-        """Fresh, tracked poses (x, y, yaw) and radii of every other car of the fleet."""
-        now_mono, up = time.monotonic(), self.scenario.natnet.up_axis
-        others = []
-        natnet_client = self._natnet
-        for body_id, sample in (natnet_client.latest_all() if natnet_client is not None else {}).items():
-            car_id = self._bodies.get(body_id)
-            if (car_id is None or car_id == self.car.id or not sample.body.tracking_valid
-                    or now_mono - sample.received_s > self.scenario.control.pose_timeout_s):
-                continue
-            x, y, yaw = natnet.to_ground_plane(sample.body.position, sample.body.orientation, up)
-            if math.isfinite(x) and math.isfinite(y) and math.isfinite(yaw):
-                others.append((x, y, yaw, self.agent.radius(car_id)))
-        return others
+    # --- the command loop (fleet.command_loop) ------------------------------------------------
 
-    def _control_loop(self, sender: CommandSender) -> None:
-        self.control.started = time.monotonic()
-        next_ping = self.control.started
-        rate = self.scenario.control.command_rate_hz
-        gaps: deque[float] = deque(maxlen=int(GAP_WINDOW_S * rate))  # recent gaps between ticks
-        last = None
-        for deadline, now_mono in ticks(1.0 / rate, self.stop):
-            self.control.add(max(0.0, now_mono - deadline) * 1e3, int(60 * rate))
-            gaps.append(1.0 / rate if last is None else now_mono - last)
-            last = now_mono
-            try:
-                self._command(sender, max(gaps))
-                if now_mono >= next_ping:
-                    next_ping = max(next_ping + self.scenario.control.link_ping_period_s, now_mono)
-                    sender.send(0.0, 0.0, Flags.STOP | Flags.PING)
-                for answer in sender.answers():
-                    self._answered(answer)
-            except Exception:  # a bad tick must not take the car's brakes with it
-                log.exception("car %d: control tick failed; commanding stop", self.car.id)
-                sender.send(0.0, 0.0, Flags.STOP | (Flags.E_STOP if self.operation.mode == Mode.E_STOPPED else 0))
-        self.control.stopped = time.monotonic()
-
-    def _answered(self, answer: Answer) -> None:
-        """The car answered a PING: its link is up; what it says of its e-stop latch."""
-        now = self.clock()
-        self._link_answered = now
-        self._car_latched = answer.e_stop_latched
-        with self._operation_lock:
-            changed = self.operation.car_reports_latch(answer.e_stop_latched, now)
-        if changed:
+    def _feed_command_loop(self, now: float) -> None:
+        """The plan and a fresh permit to the command loop; what it reports, taken in."""
+        if self.operation.check_deadman(now):
             log.warning("car %d: %s", self.car.id, self.operation.reason)
-
-    def _command(self, sender: CommandSender, tick_gap_s: float) -> None:
-        """One tick: the command for the car; ``tick_gap_s`` the longest recent gap between
-        ticks, which with the pose's age is the guard's reaction time (agent.guard)."""
-        seen = self._own_pose()
-        pose, age = seen if seen is not None else (None, 0.0)
-        plan = self._plan
-        now = self.clock()
-        with self._operation_lock:
-            if self.operation.check_deadman(now):
-                log.warning("car %d: %s", self.car.id, self.operation.reason)
-            may_drive = self.operation.may_drive(now)
-            link = self.operation.next_flags(now)
-        go = may_drive and not self.agent.at_goal
-        flags = Flags.E_STOP if link.e_stop else Flags.RELEASE if link.release else Flags.NONE
-        turn = pose and may_drive and not link.e_stop and self.laps.turn_command(
-            now, pose[2], self.scenario.tracking, self.scenario.vehicle)
-        if pose is None:
-            self.control.stale_pose_stops += 1
-            self.control.stops += 1
-            sender.send(0.0, 0.0, Flags.STOP | flags)
-        elif turn:  # between laps: turning in place towards the next leg
-            sender.send(*turn, flags)
-        else:  # the control step both simulations share (bridge.drive): STOP without a plan or leave
-            command = drive(plan, now, pose, go and not link.e_stop, self._others_seen, self.car.radius_m,
-                            self.scenario, self.sdf, reaction_time(age, tick_gap_s, self.scenario.guard))
-            if command.stop:
-                self.control.stops += 1
-                sender.send(0.0, 0.0, Flags.STOP | flags)
-            else:
-                self.control.guard_limited += command.guard_limited
-                sender.send(command.v, command.omega, flags)
-                if self.motion.add(now, pose[0], pose[1], command.v):
-                    self.counters["stuck"] += self.motion.stuck
-                    log.log(logging.WARNING if self.motion.stuck else logging.INFO, "car %d: %s", self.car.id,
-                            "told to drive but not moving: telling peers it stands still" if self.motion.stuck
-                            else "moving again")
-        self.control.sent += 1
+        link = self.operation.next_flags(now)
+        command = self.command
+        command.keep_alive()
+        command.send_plan(self._plan)
+        command.grant(may_drive=self.operation.may_drive(now), at_goal=self.agent.at_goal, e_stop=link.e_stop,
+                      release=link.release, trial=self.operation.trial, turn=self.laps.turn)
+        report, before = command.report(), self.command_report
+        self.command_report = report
+        if report.answers != before.answers and self.operation.car_reports_latch(report.latched, now):
+            log.warning("car %d: %s", self.car.id, self.operation.reason)
+        if report.stuck != self.stuck and self.operation.mode == Mode.DRIVING:
+            self.stuck = report.stuck
+            self.counters["stuck"] += self.stuck
+            log.log(logging.WARNING if self.stuck else logging.INFO, "car %d: %s", self.car.id,
+                    "told to drive but not moving: telling peers it stands still" if self.stuck
+                    else "moving again")
 
     # --- the main loop -------------------------------------------------------------------------
 
     def run(self, stats_path: Path | None = None) -> int:
         scenario, car = self.scenario, self.car
-        sys.setswitchinterval(SWITCH_INTERVAL_S)
         log.info("car %d: NatNet %s at %s, link %s (version %d)", car.id, scenario.natnet.mode, scenario.natnet.server,
                  car.link, car.link_version)
-        with CommandSender.for_car(car, source=SOURCE_CAR_PROCESS, stamp_clock=self.clock) as sender:
-            controller = threading.Thread(target=self._control_loop, args=(sender,), name=f"control-{car.id}",
-                                          daemon=True)
-            controller.start()  # STOP to the car from now on, whatever else is not up yet
-            connector = threading.Thread(target=self._connect_natnet, name=f"natnet-connect-{car.id}", daemon=True)
-            connector.start()
-            bus = None
-            try:
-                bus = self._open_bus()
-                if bus is not None:
-                    self._main_loop(bus)
-            finally:
-                self.stop.set()
-                controller.join(timeout=2.0)
-                sender.stop()  # STOP datagrams before the socket closes
-                connector.join(timeout=self.natnet.connect_timeout_s + 1.0)
-                self.state = "stopped"
-                if bus is not None:
-                    self._publish_status(bus)
-                if stats_path is not None:
-                    write_stats(stats_path, self, bus, sender)
-                if self._natnet is not None:
-                    self._natnet.close()
-                if bus is not None:
-                    bus.close()
+        self.command.start()  # STOP to the car from its first tick, whatever else is not up yet
+        connector = threading.Thread(target=self._connect_natnet, name=f"natnet-connect-{car.id}", daemon=True)
+        connector.start()
+        bus = None
+        try:
+            bus = self._open_bus()
+            if bus is not None:
+                self._main_loop(bus)
+        finally:
+            self.stop.set()
+            self.command.close()  # STOP datagrams before anything else
+            connector.join(timeout=self.natnet.connect_timeout_s + 1.0)
+            self.state = "stopped"
+            if bus is not None:
+                self._publish_status(bus)
+            if stats_path is not None:
+                write_stats(stats_path, self, bus)
+            if self._natnet is not None:
+                self._natnet.close()
+            if bus is not None:
+                bus.close()
         return 0
 
     def _connect_natnet(self) -> None:
@@ -360,7 +280,7 @@ class CarProcess:
         return waiting_for(
             motive=None if self._natnet is not None else f"{n.server}:{n.command_port} ({self._natnet_problem})",
             body=None if self._natnet is None or self._own_pose() is not None else self.car.body_id,
-            link=None if now - self._link_answered <= 3 * self.scenario.control.link_ping_period_s + 1.0
+            link=None if now - self.command_report.answered_at <= 3 * self.scenario.control.link_ping_period_s + 1.0
             else self.car.link,
             absent_peers=[c.id for c in self.scenario.cars if c.id != self.car.id and not self._alive.get(c.id)],
             mode=self.operation.mode, hears_operator=self.operation.hears_operator(now))
@@ -388,12 +308,14 @@ class CarProcess:
                     and now - started_wait > control.start_timeout_s):
                 log.warning("car %d: no start message for %.0f s; starting now", self.car.id, control.start_timeout_s)
                 self._start(None)
+            self._feed_command_loop(now)
             self.agent.gather_evidence(now)
             if now >= next_replan:
                 next_replan += control.replan_period_s
                 if now - next_replan > control.replan_period_s:
                     next_replan = now + control.replan_period_s  # do not try to catch up
                 self._replan(now)
+                self._feed_command_loop(self.clock())
                 next_plan = now + control.plan_period_s
                 self._publish_plan(bus, now, repeat=False)  # a new plan goes out at once, both ways
             if now >= next_plan:  # and again every plan_period_s, best effort: a lost plan is soon replaced
@@ -417,7 +339,7 @@ class CarProcess:
 
     def _state(self) -> str:
         mode = self.operation.mode
-        if mode == Mode.DRIVING and self.motion.stuck:
+        if mode == Mode.DRIVING and self.stuck:
             return "stuck"
         return mode.value
 
@@ -438,17 +360,15 @@ class CarProcess:
                 self.counters["replan_errors"] += 1
             aside = self.agent.deadlock.detour
             if parked and not self.agent.at_goal and aside is not None and aside.for_peer is not None:
-                with self._operation_lock:
-                    if self.operation.step_aside(now, aside.for_peer):
-                        log.info("car %d: %s", self.car.id, self.operation.reason)
+                if self.operation.step_aside(now, aside.for_peer):
+                    log.info("car %d: %s", self.car.id, self.operation.reason)
         own = self.agent.tracks.get(self.car.id)
         motion = own.motion() if own else None
         if self.operation.mode == Mode.DRIVING and motion is not None \
                 and self.laps.advance(self.agent, tuple(motion.position), now):
             log.info("car %d: lap %d of %d", self.car.id, self.laps.lap, self.laps.laps)
         if self.operation.mode == Mode.DRIVING and self.arrived:
-            with self._operation_lock:
-                self.operation.arrived()
+            self.operation.arrived()
             log.info("car %d: %s", self.car.id, self.operation.reason)
         self._plan = self.agent.plan
 
@@ -461,7 +381,7 @@ class CarProcess:
         outgoing = self.agent.plan_message(now)
         own = self.agent.tracks.get(self.car.id)
         motion = own.motion() if own else None
-        if outgoing is not None and self.motion.stuck and motion is not None:  # the truth: standing still
+        if outgoing is not None and self.stuck and motion is not None:  # the truth: standing still
             outgoing = dataclasses.replace(outgoing, plan=standing(motion.position, now))
         if outgoing is not None:
             bus.publish("plan", messages.encode(outgoing), repeat=repeat)

@@ -10,13 +10,14 @@ import math
 from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..agent.operation import Mode
-from ..bridge.carlink import CommandSender
-from .bus import FleetBus
+
+if TYPE_CHECKING:  # the command loop's process imports this module: no Zenoh there
+    from .bus import FleetBus
 
 log = logging.getLogger("trustfg.fleet.car_process")
 
@@ -108,9 +109,12 @@ def status_counters(process: Any, now: float) -> dict[str, int]:
     checks, the dashboard and ``trustfg check`` read)."""
     counters = dict(process.agent.counters | process.counters)
     counters |= {f"inbox_{k}": v for k, v in process.inbox.dropped.items()}
-    counters["commands_sent"] = process.control.sent
-    counters["stale_pose_stops"] = process.control.stale_pose_stops
-    counters["guard_limited"] = process.control.guard_limited
+    control = process.command_report  # the command loop's (fleet.command_loop)
+    counters["commands_sent"] = control.sent
+    counters["stale_pose_stops"] = control.stale_pose_stops
+    counters["guard_limited"] = control.guard_limited
+    counters["link_lease_lapsed"] = control.lease_lapsed
+    counters["link_loop_restarts"] = process.command.restarts
     counters["lap"] = process.laps.lap
     if process.agent.liar is not None:
         counters |= {f"attack_{k}": v for k, v in process.agent.liar.counters.items()}
@@ -118,8 +122,8 @@ def status_counters(process: Any, now: float) -> dict[str, int]:
         counters[f"plan_age_ms_{peer}"] = int(min(1e9, max(0.0, now - view.accepted_received) * 1e3))
     counters |= clock_counters(process.agent.clock_offsets())  # each peer's clock, as we estimate it
     # the car link, as the car's answers tell
-    counters["link_answer_age_ms"] = int(min(1e9, max(0.0, now - process._link_answered) * 1e3))
-    counters["link_e_stop_latched"] = int(process._car_latched)
+    counters["link_answer_age_ms"] = int(min(1e9, max(0.0, now - control.answered_at) * 1e3))
+    counters["link_e_stop_latched"] = int(control.latched)
     # plan ages and outcomes (agent.safe_plan), deadlocks, the link, the peers' clocks (agent.clocks)
     first = ("plan", "deadlock", "link_", "clock_")
     return dict(sorted(counters.items(), key=lambda kv: not kv[0].startswith(first))[:64])
@@ -132,7 +136,7 @@ def clock_counters(offsets: dict[int, float]) -> dict[str, int]:
             for peer, offset in offsets.items()}
 
 
-def write_stats(path: Path, process: Any, bus: FleetBus | None, sender: CommandSender) -> None:
+def write_stats(path: Path, process: Any, bus: FleetBus | None) -> None:
     """The ``--stats`` JSON summary of a car process (fleet.car_process.CarProcess), at its exit."""
     nat = process._natnet.stats() if process._natnet is not None else None
     agent = process.agent
@@ -142,7 +146,7 @@ def write_stats(path: Path, process: Any, bus: FleetBus | None, sender: CommandS
         "trial": process.operation.trial,
         "at_goal": process.arrived,
         "replan_ms": [round(x, 3) for x in agent.replan_ms],
-        "control": process.control.summary(),
+        "control": process.command.final or {},
         "agent": dict(agent.counters),
         "trust": dict(agent.trust.counters),
         "clock_offsets_s": {str(peer): round(offset, 4) for peer, offset in agent.clock_offsets().items()},
@@ -152,7 +156,7 @@ def write_stats(path: Path, process: Any, bus: FleetBus | None, sender: CommandS
         "bus": dict(bus.counters) if bus is not None else {},
         "natnet": {"received": nat.received, "decoded": nat.decoded, "dropped": nat.dropped,
                    "rejected": dict(nat.rejected)} if nat is not None else None,
-        "link_sent": sender.stats.sent,
-        "link_answers": sender.stats.answers,
+        "link_sent": process.command.link.get("link_sent"),
+        "link_answers": process.command.link.get("link_answers"),
     }
     path.write_text(json.dumps(stats, indent=1))

@@ -111,14 +111,24 @@ class ControlConfig:
     retry_s: float = 2.0
     """Pause between attempts to reach Motive or to open the bus while a car process starts
     (it keeps its car stopped meanwhile)."""
+    lease_s: float = 1.0
+    """The command loop (fleet.command_loop, a process of its own) drives the car only on a
+    permit from the car process younger than this: an agent that hangs or dies stops its
+    car within it. Longer than a replan on a loaded machine (the main loop renews the
+    permit between replans)."""
+    realtime_priority: int = 10
+    """SCHED_FIFO priority of the command loop where the OS grants it (root, or an
+    RLIMIT_RTPRIO); 0: normal scheduling."""
 
     def validate(self, path: str) -> None:
         for name in ("command_rate_hz", "replan_period_s", "plan_period_s", "trust_report_period_s",
                      "pose_period_s", "status_period_s", "pose_timeout_s", "lap_turn_s",
-                     "link_ping_period_s", "retry_s"):
+                     "link_ping_period_s", "retry_s", "lease_s"):
             positive(getattr(self, name), f"{path}.{name}")
         if self.laps < 1:
             raise ConfigError(f"{path}.laps: must be >= 1")
+        if not 0 <= self.realtime_priority <= 99:
+            raise ConfigError(f"{path}.realtime_priority: must be 0 (off) to 99")
         if self.start_timeout_s < 0:
             raise ConfigError(f"{path}.start_timeout_s: must be >= 0")
 

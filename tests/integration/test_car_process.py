@@ -3,6 +3,7 @@ authenticated link, version 2, with a key made for the test)."""
 
 import dataclasses
 import json
+import os
 import signal
 import subprocess
 import sys
@@ -107,3 +108,61 @@ def test_a_car_with_another_key_hears_nothing_from_the_car_process(one_car, tmp_
                     process.kill()
                     process.wait()
                 process.stderr.close()
+
+
+def command_loop(pid: int) -> int:
+    """The pid of a car process's command loop (its spawned child, not multiprocessing's
+    resource tracker)."""
+    for child in open(f"/proc/{pid}/task/{pid}/children").read().split():
+        if b"resource_tracker" not in open(f"/proc/{child}/cmdline", "rb").read():
+            return int(child)
+    raise AssertionError(f"car process {pid} has no command loop")
+
+
+def alive(pid: int) -> bool:
+    try:
+        return open(f"/proc/{pid}/stat").read().split(")")[-1].split()[0] not in ("Z", "X")
+    except OSError:
+        return False
+
+
+def test_a_frozen_car_process_stops_its_car_and_a_killed_one_leaves_it_stopped(one_car, tmp_path):
+    """The layer under the agent (fleet.command_loop): with the car process frozen
+    (SIGSTOP: a hung agent) its command loop stops the car once the lease runs out, and
+    drives on when the agent comes back; with the car process killed (SIGKILL) the loop
+    stops the car and exits."""
+    fleet, path = one_car
+    car = fleet.cars[0]
+    options = NatNetServerOptions(address="127.0.0.1", command_port=fleet.natnet.command_port, multicast=False,
+                                  data_port=0, natnet_version=natnet.V3_1)
+    host, port = car.link[len("udp://"):].rsplit(":", 1)
+    observer = f"tcp/127.0.0.1:{free_port()}"
+    with NatNetServer(options, served(car, lambda: True)), \
+            CommandReceiver(car.id, (host, int(port)), key=link_key(car)) as link, \
+            FleetBus(fleet.bus, fleet.fleet, None, listen=(observer,)) as bus:
+        process = subprocess.Popen([sys.executable, "-m", "trustfg", "car", "--id", str(car.id), "--config",
+                                    str(path)], stderr=subprocess.DEVNULL)
+        loop = None
+        try:
+            assert wait_for(lambda: bus.alive.get(car.id), 20.0)
+            go = messages.StartMessage(1, time.time(), 1, {car.id: (time.time() + 0.2, 0.4)})
+            bus.publish("start", messages.encode(go))
+            assert wait_for(lambda: link.last_command and link.last_command.v_mps > 0.05, 10.0)
+            loop = command_loop(process.pid)
+            process.send_signal(signal.SIGSTOP)  # the agent hangs; its command loop does not
+            frozen = time.monotonic()
+            assert wait_for(lambda: link.last_command.stop, fleet.control.lease_s + 3.0)
+            assert time.monotonic() - frozen >= 0.5 * fleet.control.lease_s  # the lease ran out, not the loop
+            process.send_signal(signal.SIGCONT)
+            assert wait_for(lambda: link.last_command.v_mps > 0.05, 5.0)  # a fresh permit: it drives on
+            process.kill()
+            process.wait()
+            assert wait_for(lambda: not alive(loop), 3.0)
+            assert link.last_command.stop
+        finally:
+            if process.poll() is None:
+                process.send_signal(signal.SIGCONT)
+                process.kill()
+                process.wait()
+            if loop is not None and alive(loop):
+                os.kill(loop, signal.SIGKILL)
