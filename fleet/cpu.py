@@ -36,13 +36,31 @@ def parse_stat_ticks(text: str) -> int:
     return int(fields[11]) + int(fields[12])
 
 
-def read_ticks(pid: int) -> int | None:
-    """utime + stime of a process in clock ticks; None if it is gone or unreadable."""
+def read_ticks(pid: int, children: bool = False) -> int | None:
+    """utime + stime of a process in clock ticks; None if it is gone or unreadable.
+    ``children``: with its live descendants' (a car process and its command loop,
+    fleet.command_loop: what one car costs)."""
     try:
         with open(f"/proc/{pid}/stat") as f:
-            return parse_stat_ticks(f.read())
+            ticks = parse_stat_ticks(f.read())
     except (OSError, ValueError):
         return None
+    if children:
+        for child in child_pids(pid):
+            ticks += read_ticks(child, children=True) or 0
+    return ticks
+
+
+def child_pids(pid: int) -> list[int]:
+    """The live children of a process (every thread's, from /proc/PID/task/TID/children)."""
+    found = []
+    try:
+        for task in os.listdir(f"/proc/{pid}/task"):
+            with open(f"/proc/{pid}/task/{task}/children") as f:
+                found += [int(c) for c in f.read().split()]
+    except OSError:
+        pass
+    return found
 
 
 @dataclass(frozen=True)
@@ -64,12 +82,16 @@ class CpuMeter:
     """Reads of named processes over a run."""
 
     pids: dict[str, int] = field(default_factory=dict)
+    trees: set[str] = field(default_factory=set)
+    """Processes read with their descendants (read_ticks ``children``)."""
     first: dict[str, Read] = field(default_factory=dict)
     last: dict[str, Read] = field(default_factory=dict)
     marks: dict[str, dict[str, Read]] = field(default_factory=dict)
 
-    def watch(self, name: str, pid: int) -> None:
+    def watch(self, name: str, pid: int, children: bool = False) -> None:
         self.pids[name] = pid
+        if children:
+            self.trees.add(name)
         self.sample([name])
 
     def sample(self, names: list[str] | None = None, mark: str | None = None,
@@ -77,7 +99,7 @@ class CpuMeter:
         """Read every watched process (or ``names``); ``mark`` also keeps this read under
         that name (for shares between marks)."""
         for name in self.pids if names is None else names:
-            ticks = read_ticks(self.pids[name])
+            ticks = read_ticks(self.pids[name], children=name in self.trees)
             if ticks is None:
                 continue
             read = Read(clock(), ticks)

@@ -40,7 +40,7 @@ class Processes:
         process = subprocess.Popen(argv, stdout=stdout or log_file, stderr=log_file, start_new_session=True, text=True)
         log_file.close()
         self.children[name] = process
-        self.cpu.watch(name, process.pid)
+        self.cpu.watch(name, process.pid, children=True)  # a car process with its command loop
         return process
 
     def stop(self, names: list[str] | None = None) -> None:

@@ -46,3 +46,22 @@ def test_the_meter_sees_cpu_burnt_and_not_time_slept():
     assert 0.25 <= summary["me"]["cpu_s"] <= 0.45, summary
     assert summary["me"]["share"] < summary["me"]["share_slept_burnt"], summary
     assert summary["gone"] is None
+
+
+def test_a_process_read_with_its_children_counts_what_they_burn():
+    """A car process is read with its command loop (fleet.command_loop): a child that
+    burns 0.3 s of CPU shows in its parent's tree, not in the parent alone."""
+    import subprocess
+    import sys
+
+    child = subprocess.Popen([sys.executable, "-c", "import sys, time\nt = time.process_time() + 0.3\n"
+                              "while time.process_time() < t: pass\nsys.stdin.read()"], stdin=subprocess.PIPE)
+    try:
+        deadline = time.monotonic() + 10.0
+        while (read_ticks(child.pid) or 0) < 0.3 * CLOCK_TICKS_PER_S and time.monotonic() < deadline:
+            time.sleep(0.05)
+        alone, tree = read_ticks(os.getpid()), read_ticks(os.getpid(), children=True)
+        assert tree - alone >= 0.25 * CLOCK_TICKS_PER_S
+    finally:
+        child.stdin.close()
+        child.wait()
