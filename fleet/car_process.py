@@ -198,7 +198,8 @@ class CarProcess:
             log.warning("car %d: %s", self.car.id, self.operation.reason)
         link = self.operation.next_flags(now)
         command = self.command
-        command.keep_alive()
+        if not self.stop.is_set():  # stopping, SIGTERM may have reached the loop first (one process group)
+            command.keep_alive()
         command.send_plan(self._plan)
         command.grant(may_drive=self.operation.may_drive(now), at_goal=self.agent.at_goal, e_stop=link.e_stop,
                       release=link.release, trial=self.operation.trial, turn=self.laps.turn)

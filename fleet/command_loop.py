@@ -262,11 +262,13 @@ def _connect(loop: _Loop, stop: threading.Event) -> None:
 
 
 def serve(settings: LoopSettings, conn: Any, report: Any) -> None:
-    """The command process's main: ticks until told to quit, its pipe closes, or SIGTERM."""
+    """The command process's main: ticks until told to quit or its pipe closes."""
     logging.basicConfig(level=settings.log_level, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     stop = threading.Event()
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the car process, which stops us
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    # Ctrl-C and a SIGTERM to the process group reach the car process too, which stops us
+    # once it is done (its summary needs ours); its death closes our pipe, which stops us.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
     sys.setswitchinterval(SWITCH_INTERVAL_S)
     scenario = settings.scenario
     car = scenario.car(settings.car_id)

@@ -149,8 +149,9 @@ def print_summary(summary: dict) -> None:
         f"{i}: {r['median']}/{r['p95']}" if r else f"{i}: -" for i, r in summary["replan_ms"].items()))
     print("plans (verified first try / on retry / fallback), deadlocks:  " + "  ".join(
         f"{i}: {o['first']}/{o['retry']}/{o['fallback']} {o['deadlocks']}" for i, o in summary["plan_outcomes"].items()))
-    print("commands (Hz, jitter p99 ms): " + "  ".join(
-        f"{i}: {c['rate_hz']}/{c['jitter_ms_p99']}" if c else f"{i}: -" for i, c in summary["control"].items()))
+    print("commands (Hz, lateness p99 ms, ticks stopped on a lapsed permit): " + "  ".join(
+        f"{i}: {c['rate_hz']}/{c['jitter_ms_p99']}/{c.get('lease_lapsed', '-')}" if c else f"{i}: -"
+        for i, c in summary["control"].items()))
     print("cpu (share of one core, whole run / go to first arrival): " + "  ".join(
         f"{name}: {c['share']}/{c.get('share_go_first_arrival')}" if c else f"{name}: -"
         for name, c in summary.get("cpu", {}).items()))
