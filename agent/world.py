@@ -17,8 +17,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from matplotlib.path import Path as PolygonPath
-from scipy import ndimage
 
 from .config import Obstacle, WorldConfig
 
@@ -85,6 +83,8 @@ def obstacle_mask(world: WorldConfig) -> tuple[np.ndarray, tuple[float, float]]:
 def build_sdf(world: WorldConfig) -> SignedDistanceField:
     mask, origin = obstacle_mask(world)
     cell = world.resolution_m
+    from scipy import ndimage  # here: the command loop (fleet.command_loop) reads a field, never builds one
+
     outside = ndimage.distance_transform_edt(~mask) * cell  # free cells: distance to obstacle
     inside = ndimage.distance_transform_edt(mask) * cell  # obstacle cells: distance to free
     # The transform measures centre to centre; the boundary lies half a cell in between.
@@ -96,6 +96,8 @@ def _inside(obstacle: Obstacle, gx: np.ndarray, gy: np.ndarray) -> np.ndarray:
     if obstacle.kind == "rect":
         (ax, ay), (bx, by) = obstacle.min, obstacle.max
         return (gx >= ax) & (gx <= bx) & (gy >= ay) & (gy <= by)
+    from matplotlib.path import Path as PolygonPath
+
     polygon = PolygonPath(np.asarray(obstacle.points, dtype=float))
     points = np.stack([gx.ravel(), gy.ravel()], axis=1)
     return polygon.contains_points(points).reshape(gx.shape)

@@ -92,7 +92,7 @@ class CarProcess:
         self.inbox = messages.Inbox()
         self.frames: deque = deque(maxlen=4096)
         self.counters: Counter = Counter()
-        self.command = CommandProcess(scenario, car)
+        self.command = CommandProcess(scenario, car, self.sdf)
         self.command_report = Report()
         self.stuck = False
         self.state = Mode.WAITING.value

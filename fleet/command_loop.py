@@ -55,7 +55,7 @@ from typing import Any
 from ..agent.config import CarConfig, Scenario
 from ..agent.gp import Plan
 from ..agent.guard import reaction_time
-from ..agent.world import build_sdf
+from ..agent.world import SignedDistanceField
 from ..bridge import natnet
 from ..bridge.carlink import SOURCE_CAR_PROCESS, CommandSender, Flags
 from ..bridge.drive import drive
@@ -116,6 +116,8 @@ class LoopSettings:
 
     scenario: Scenario
     car_id: int
+    sdf: SignedDistanceField
+    """The car process's field, sent rather than built again (scipy stays out of the loop)."""
     log_level: int = logging.INFO
 
 
@@ -274,7 +276,7 @@ def serve(settings: LoopSettings, conn: Any, report: Any) -> None:
     car = scenario.car(settings.car_id)
     scheduling = realtime(scenario.control.realtime_priority)  # before any thread: they inherit it
     offset = car.clock_offset_s
-    loop = _Loop(scenario, car, report, clock=lambda: time.time() + offset, sdf=build_sdf(scenario.world))
+    loop = _Loop(scenario, car, report, clock=lambda: time.time() + offset, sdf=settings.sdf)
     loop._publish("realtime", float(scheduling != "normal"))
     connector = threading.Thread(target=_connect, args=(loop, stop), name=f"natnet-connect-{car.id}", daemon=True)
     connector.start()
@@ -345,9 +347,10 @@ class Report:
 class CommandProcess:
     """The car process's handle on its command loop: start, feed, read, restart, close."""
 
-    def __init__(self, scenario: Scenario, car: CarConfig):
+    def __init__(self, scenario: Scenario, car: CarConfig, sdf: SignedDistanceField):
         self.scenario = scenario
         self.car = car
+        self.sdf = sdf
         self.lease_s = scenario.control.lease_s
         self._context = multiprocessing.get_context("spawn")
         self._process = None
@@ -365,7 +368,7 @@ class CommandProcess:
         parent, child = self._context.Pipe()
         self._report = self._context.Array("d", len(REPORT_FIELDS), lock=False)
         self._report[REPORT_FIELDS.index("answered_at")] = -math.inf
-        settings = LoopSettings(self.scenario, self.car.id, logging.getLogger().getEffectiveLevel())
+        settings = LoopSettings(self.scenario, self.car.id, self.sdf, logging.getLogger().getEffectiveLevel())
         self._process = self._context.Process(target=serve, args=(settings, child, self._report),
                                               name=f"trustfg-command-{self.car.id}", daemon=True)
         self._process.start()

@@ -12,6 +12,7 @@ import pytest
 
 from tests.conftest import wait_for
 from trustfg.agent.gp import Plan
+from trustfg.agent.world import build_sdf
 from trustfg.bridge import natnet
 from trustfg.bridge.carlink import CommandReceiver, link_key
 from trustfg.fleet.command_loop import CommandProcess, Permit, allowed
@@ -66,7 +67,7 @@ def loop_and_car(one_car):
     options = NatNetServerOptions(address="127.0.0.1", command_port=one_car.natnet.command_port, multicast=False,
                                   data_port=0, natnet_version=natnet.V3_1)
     host, port = car.link[len("udp://"):].rsplit(":", 1)
-    command = CommandProcess(one_car, car)
+    command = CommandProcess(one_car, car, build_sdf(one_car.world))
     with NatNetServer(options, bodies), CommandReceiver(car.id, (host, int(port)), key=link_key(car)) as link:
         command.start()
         try:
