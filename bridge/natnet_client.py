@@ -450,3 +450,17 @@ class NatNetClient:
                         last_rx = now
                 except OSError as exc:
                     log.debug("NatNet send: %s", exc)
+
+
+def fresh_pose(client: NatNetClient | None, body_id: int, max_age_s: float,
+               up_axis: str = "y") -> tuple[tuple[float, float, float], float] | None:
+    """A rigid body's latest tracked pose on the ground plane (x, y, yaw) and its age in
+    seconds; None without a client, before the body was seen, when Motive lost it, or
+    when the pose is older than ``max_age_s``."""
+    sample = client.latest(body_id) if client is not None else None
+    if sample is None or not sample.body.tracking_valid:
+        return None
+    age = time.monotonic() - sample.received_s
+    if age > max_age_s:
+        return None
+    return natnet.to_ground_plane(sample.body.position, sample.body.orientation, up_axis), age

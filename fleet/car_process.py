@@ -57,7 +57,7 @@ from ..agent.scenario_files import load_scenario
 from ..agent.world import build_sdf
 from ..bridge import natnet
 from ..bridge.carlink import link_key
-from ..bridge.natnet_client import NatNetClient, NatNetConnectionError, client_options
+from ..bridge.natnet_client import NatNetClient, NatNetConnectionError, client_options, fresh_pose
 from .bus import BusError, FleetBus, Received, zenoh_config
 from .car_report import WaitingLog, status_counters, waiting_for, write_stats
 from .command import command_parser, configured, stop_on_signals
@@ -180,15 +180,8 @@ class CarProcess:
     def _own_pose(self) -> tuple[tuple[float, float, float], float] | None:
         """The car's own fresh, tracked pose (x, y, yaw) and its age in seconds (the
         command loop reads its own; this one is for the bus and for what we wait for)."""
-        natnet_client = self._natnet
-        sample = natnet_client.latest(self.car.body_id) if natnet_client is not None else None
-        if sample is None or not sample.body.tracking_valid:
-            return None
-        age = time.monotonic() - sample.received_s
-        if age > self.scenario.control.pose_timeout_s:
-            return None
-        return natnet.to_ground_plane(sample.body.position, sample.body.orientation,
-                                      self.scenario.natnet.up_axis), age
+        return fresh_pose(self._natnet, self.car.body_id, self.scenario.control.pose_timeout_s,
+                          self.scenario.natnet.up_axis)
 
     # --- the command loop (fleet.command_loop) ------------------------------------------------
 

@@ -60,7 +60,7 @@ from ..bridge import natnet
 from ..bridge.carlink import SOURCE_CAR_PROCESS, CommandSender, Flags
 from ..bridge.drive import drive
 from ..bridge.motion_watch import MotionWatch
-from ..bridge.natnet_client import NatNetClient, NatNetConnectionError, client_options
+from ..bridge.natnet_client import NatNetClient, NatNetConnectionError, client_options, fresh_pose
 from ..bridge.tracking import turn_towards
 from .car_report import ControlStats
 from .ticker import ticks
@@ -160,14 +160,8 @@ class _Loop:
 
     def own_pose(self) -> tuple[tuple[float, float, float], float] | None:
         """The car's own fresh, tracked pose (x, y, yaw) and its age in seconds."""
-        sample = self.natnet.latest(self.car.body_id) if self.natnet is not None else None
-        if sample is None or not sample.body.tracking_valid:
-            return None
-        age = time.monotonic() - sample.received_s
-        if age > self.scenario.control.pose_timeout_s:
-            return None
-        return natnet.to_ground_plane(sample.body.position, sample.body.orientation,
-                                      self.scenario.natnet.up_axis), age
+        return fresh_pose(self.natnet, self.car.body_id, self.scenario.control.pose_timeout_s,
+                          self.scenario.natnet.up_axis)
 
     def others_seen(self) -> list[tuple[float, float, float, float]]:
         """Fresh, tracked poses (x, y, yaw) and radii of every other car of the fleet."""
