@@ -61,7 +61,7 @@ from ..bridge.natnet_client import NatNetClient, NatNetConnectionError, client_o
 from .bus import BusError, FleetBus, Received, zenoh_config
 from .car_report import WaitingLog, status_counters, waiting_for, write_stats
 from .command import command_parser, configured, stop_on_signals
-from .command_loop import CommandProcess, Report
+from .command_process import CommandProcess, Report
 from .laps import Laps
 
 log = logging.getLogger(__name__)

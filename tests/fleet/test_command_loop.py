@@ -15,7 +15,8 @@ from trustfg.agent.gp import Plan
 from trustfg.agent.world import build_sdf
 from trustfg.bridge import natnet
 from trustfg.bridge.carlink import CommandReceiver, link_key
-from trustfg.fleet.command_loop import CommandProcess, Permit, allowed
+from trustfg.fleet.command_loop import Permit, allowed
+from trustfg.fleet.command_process import CommandProcess
 from trustfg.fleet.launch import loopback_fleet
 from trustfg.fleet.link_keys import with_link_keys
 from trustfg.mocap_sim.natnet_server import NatNetServer, NatNetServerOptions
