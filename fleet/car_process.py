@@ -1,6 +1,6 @@
 """``trustfg car --id N --config FILE``: one car's process, agent and bridge together.
 
-Threads, each owning what it touches:
+Threads and one process of its own, each owning what it touches:
 
 * the NatNet client's socket thread hands every frame to a queue (and keeps the latest
   pose of every rigid body);
@@ -32,7 +32,8 @@ process keeps commanding its plan but tells its peers the truth, a plan that sta
 The planner (GTSAM, numpy) holds this interpreter's lock while it works; the command loop
 has an interpreter of its own (and real-time priority where the OS grants it), and its
 timing (command rate, lateness) is measured and reported. SIGTERM or SIGINT stops the
-loops, has the command loop send STOP to the car, and closes every socket and session. ``--stats FILE`` writes a JSON summary at exit.
+loops, has the command loop send STOP to the car, and closes every socket and session.
+``--stats FILE`` writes a JSON summary at exit.
 
 The car is chosen by addresses in the config (its NatNet server, its ``link``), never by
 a simulation switch: the same process drives a real car or one of mocap_sim's.
