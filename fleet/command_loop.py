@@ -132,6 +132,16 @@ def realtime(priority: int) -> str:
         return "normal"
 
 
+def name_process(name: str) -> None:
+    """Name this process as ps, top and /proc/PID/comm show it (Linux; 15 bytes kept)."""
+    try:
+        import ctypes
+
+        ctypes.CDLL(None).prctl(15, name.encode()[:15], 0, 0, 0)  # PR_SET_NAME
+    except (OSError, AttributeError):
+        pass
+
+
 # --- the spawned process ---------------------------------------------------------------------
 
 
@@ -267,6 +277,7 @@ def serve(settings: LoopSettings, conn: Any, report: Any) -> None:
     sys.setswitchinterval(SWITCH_INTERVAL_S)
     scenario = settings.scenario
     car = scenario.car(settings.car_id)
+    name_process(f"trustfg-cmd-{car.id}")  # ps and top show it; the spawn command line does not say
     scheduling = realtime(scenario.control.realtime_priority)  # before any thread: they inherit it
     offset = car.clock_offset_s
     loop = _Loop(scenario, car, report, clock=lambda: time.time() + offset, sdf=settings.sdf)

@@ -61,8 +61,12 @@ def trustfg_processes() -> list[str]:
         except OSError:
             continue
         text = " ".join(a.decode(errors="replace") for a in argv if a)
-        if "-m trustfg" in text or "/trustfg " in text + " ":
-            found.append(f"{entry.name}: {text}")
+        try:  # a car process's command loop is spawned: its command line is multiprocessing's
+            name = (entry / "comm").read_text().strip()
+        except OSError:
+            name = ""
+        if "-m trustfg" in text or "/trustfg " in text + " " or name.startswith("trustfg-"):
+            found.append(f"{entry.name}: {name}: {text}")
     return found
 
 
