@@ -62,7 +62,8 @@ from ..bridge.natnet_client import NatNetClient, NatNetConnectionError, client_o
 from .bus import BusError, FleetBus, Received, zenoh_config
 from .car_report import WaitingLog, status_counters, waiting_for, write_stats
 from .command import command_parser, configured, stop_on_signals
-from .command_process import CommandProcess, Report
+from .command_loop import Report
+from .command_process import CommandProcess
 from .laps import Laps
 
 log = logging.getLogger(__name__)

@@ -48,7 +48,7 @@ import sys
 import threading
 import time
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Any
 
 from ..agent.config import CarConfig, Scenario
@@ -70,9 +70,29 @@ SWITCH_INTERVAL_S = 0.001
 GAP_WINDOW_S = 5.0
 """The guard's command hold is the longest gap between control ticks over this window: a
 process that stalled lately is taken to stall again (tests/agent/test_guard.py)."""
-REPORT_FIELDS = ("ticks", "sent", "stops", "stale_pose_stops", "guard_limited", "lease_lapsed",
-                 "stuck", "answers", "latched", "answered_at", "natnet_up", "realtime")
+@dataclass(frozen=True)
+class Report:
+    """The loop's counters as last written (``answered_at``: fleet clock, -inf: never)."""
+
+    ticks: int = 0
+    sent: int = 0
+    stops: int = 0
+    stale_pose_stops: int = 0
+    guard_limited: int = 0
+    lease_lapsed: int = 0
+    stuck: bool = False
+    answers: int = 0
+    latched: bool = False
+    answered_at: float = -math.inf
+    natnet_up: bool = False
+    realtime: bool = False
+
+
+REPORT_FIELDS = tuple(f.name for f in fields(Report))
 """What the loop reports through shared memory (floats), in this order."""
+REPORT_INDEX = {name: i for i, name in enumerate(REPORT_FIELDS)}
+REPORT_KINDS = {f.name: type(f.default) for f in fields(Report)}
+"""How each float reads back (int, bool or float, by the field's default)."""
 
 
 @dataclass(frozen=True)
@@ -165,7 +185,7 @@ class _Loop:
 
     def _publish(self, name: str, value: float) -> None:
         self.counts[name] = value
-        self.report[REPORT_FIELDS.index(name)] = value
+        self.report[REPORT_INDEX[name]] = value
 
     def own_pose(self) -> tuple[tuple[float, float, float], float] | None:
         """The car's own fresh, tracked pose (x, y, yaw) and its age in seconds."""

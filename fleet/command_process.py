@@ -9,36 +9,18 @@ it reads the loop's report from shared memory, which never blocks either side.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import multiprocessing
 import time
-from dataclasses import dataclass
 
 from ..agent.config import CarConfig, Scenario
 from ..agent.gp import Plan
 from ..agent.world import SignedDistanceField
-from .command_loop import REPORT_FIELDS, LoopSettings, Permit, serve
+from .command_loop import REPORT_FIELDS, REPORT_INDEX, REPORT_KINDS, LoopSettings, Permit, Report, serve
 
 log = logging.getLogger("trustfg.fleet.command_loop")
-
-
-@dataclass(frozen=True)
-class Report:
-    """The loop's counters as last written (``answered_at``: fleet clock, -inf: never)."""
-
-    ticks: int = 0
-    sent: int = 0
-    stops: int = 0
-    stale_pose_stops: int = 0
-    guard_limited: int = 0
-    lease_lapsed: int = 0
-    stuck: bool = False
-    answers: int = 0
-    latched: bool = False
-    answered_at: float = -math.inf
-    natnet_up: bool = False
-    realtime: bool = False
 
 
 class CommandProcess:
@@ -64,7 +46,7 @@ class CommandProcess:
         """Spawn the loop (it commands STOP from its first tick until a permit comes)."""
         parent, child = self._context.Pipe()
         self._report = self._context.Array("d", len(REPORT_FIELDS), lock=False)
-        self._report[REPORT_FIELDS.index("answered_at")] = -math.inf
+        self._report[REPORT_INDEX["answered_at"]] = -math.inf
         settings = LoopSettings(self.scenario, self.car.id, self.sdf, logging.getLogger().getEffectiveLevel())
         self._process = self._context.Process(target=serve, args=(settings, child, self._report),
                                               name=f"trustfg-command-{self.car.id}", daemon=True)
@@ -104,9 +86,7 @@ class CommandProcess:
         tenth of the lease (every main-loop pass would be ~200 messages a second)."""
         now_mono = time.monotonic()
         permit = Permit(may_drive, at_goal, e_stop, release, trial, turn, now_mono + self.lease_s)
-        changed = (permit.may_drive, permit.at_goal, permit.e_stop, permit.release, permit.trial, permit.turn) != (
-            self._permit.may_drive, self._permit.at_goal, self._permit.e_stop, self._permit.release,
-            self._permit.trial, self._permit.turn)
+        changed = dataclasses.replace(self._permit, valid_until=permit.valid_until) != permit
         if changed or now_mono - self._granted_at >= 0.1 * self.lease_s:
             self._permit, self._granted_at = permit, now_mono
             self._send(("permit", permit))
@@ -114,8 +94,7 @@ class CommandProcess:
     def report(self) -> Report:
         if self._report is None:
             return Report()
-        kinds = {"stuck": bool, "latched": bool, "natnet_up": bool, "realtime": bool, "answered_at": float}
-        return Report(**{name: kinds.get(name, int)(value) for name, value in zip(REPORT_FIELDS, self._report[:])})
+        return Report(**{name: REPORT_KINDS[name](value) for name, value in zip(REPORT_FIELDS, self._report[:])})
 
     def close(self, timeout_s: float = 3.0) -> None:
         """Tell the loop to stop (it sends STOP datagrams), collect its summary, reap it."""
