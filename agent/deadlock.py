@@ -58,8 +58,10 @@ from .fallback import MOVING_MPS  # the fallback's "comes to rest": the same tes
 from .routes import connected
 from .world import SignedDistanceField
 
-DETOUR_TURNS_DEG = (0.0, 45.0, -45.0, 90.0, -90.0, 135.0, -135.0)
-"""Directions a detour tries, turned from straight away from the cars that go first."""
+DETOUR_TURNS_DEG = (0.0, 22.5, -22.5, 45.0, -45.0, 67.5, -67.5, 90.0, -90.0, 112.5, -112.5, 135.0, -135.0, 157.5,
+                    -157.5)
+"""Directions a detour tries, turned from straight away from the cars that go first
+(a road's dead end leaves one way out: a step of 22.5 degrees finds it)."""
 SEGMENT_SAMPLES = 12
 SEEN_S = 0.5
 """Cars seen within this long are what the watch goes by."""
@@ -136,8 +138,8 @@ class DeadlockWatch:
         first = [cid for cid in group if cid < self.car_id]
         if not first or not self.config.enabled:
             return None  # we go first (or resolution is off): keep trying for the goal
-        goal = detour_goal(position, [_way(peers[cid]) for cid in first],
-                           [p.position for p in peers.values()], self.config.detour_m, keep_clear, sdf, wall_clear)
+        goal = detour_goal(position, [_way(peers[cid]) for cid in first], _everyone(peers), self.config.detour_m,
+                           keep_clear, sdf, wall_clear)
         if goal is None:
             return None
         self.detour = Detour(goal, now + self.config.yield_s)
@@ -163,8 +165,8 @@ class DeadlockWatch:
                 continue
             if not connected(sdf, peer.position, peer.goal, wall_clear, parked):
                 continue  # walled in, but not by us alone
-            aside = _aside_goal(position, peer, parked, [p.position for p in peers.values()], self.config.detour_m,
-                                keep_clear, sdf, wall_clear)
+            aside = _aside_goal(position, peer, parked, _everyone(peers), self.config.detour_m, keep_clear, sdf,
+                                wall_clear)
             if aside is None:
                 continue
             self.detour = Detour(aside, now + self.config.yield_s, cid, np.array(position),
@@ -252,6 +254,14 @@ def peers_seen(tracks: dict, views: dict, own_id: int, now: float, arrival_radiu
                        and float(np.linalg.norm(plan.positions[-1] - goal)) > arrival_radius_m)
         seen[car_id] = PeerSeen(motion.position, at_goal, waiting, goal, way, halting)
     return seen
+
+
+def _everyone(peers: dict[int, PeerSeen]) -> list[np.ndarray]:
+    """What a detour keeps clear of besides the ways: every car seen, and every peer's
+    goal we know -- a car that gives way onto another's goal walls that one out of it
+    (t-junction-6 seed 49: two cars each gave way onto the other's goal and stood there
+    for good)."""
+    return [p.position for p in peers.values()] + [p.goal for p in peers.values() if p.goal is not None]
 
 
 def _way(peer: PeerSeen) -> np.ndarray:

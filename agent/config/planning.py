@@ -261,7 +261,10 @@ class DeadlockConfig:
 
     enabled: bool = True
     """Off (ablations only): deadlocks are still detected and counted, not resolved."""
-    window_s: float = 6.0
+    window_s: float = 3.0
+    """Short enough that cars standing in a door for 6-7 s at a time (bottleneck-4) are
+    seen as deadlocked; a car taken for deadlocked while it waits its turn gives way for
+    a moment and carries on (issue 9, stops 21-23)."""
     progress_m: float = 0.1
     group_radius_m: float = 1.0
     """Peers nearer than this (centres) that are stuck too belong to our group."""

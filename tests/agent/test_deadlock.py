@@ -194,3 +194,52 @@ def test_a_peer_creeping_with_every_plan_ending_short_of_its_goal_is_stuck(pocke
         asides.append(watch.step_aside(t, PARKED_IN_GAP, PARKED_IN_GAP, {2: peer}, KEEP_CLEAR, pocket, WALL_CLEAR))
     assert not watch.stalled(2, CONFIG.window_s + 0.8)
     assert any(a is not None for a in asides) is halting
+
+
+# Where a car gives way to (t-junction-6 seed 49): a road 1.2 m wide, closed at both ends.
+# Car 6 stands near the east end; car 4, which goes first, stands at the west end and
+# means to reach the east end's north lane, beside car 5 parked there.
+@pytest.fixture(scope="module")
+def road():
+    return build_sdf(WorldConfig(bounds_m=(-2.8, -0.6, 2.8, 0.6), resolution_m=0.01))
+
+
+def yields_from(position, peers: dict, room, seconds: float = CONFIG.window_s + 1.0) -> np.ndarray | None:
+    """Car 6 at ``position``, every peer standing: the first detour its watch returns."""
+    watch = DeadlockWatch(6, CONFIG)
+    detours = [watch.goal(t, position, np.array([-2.3, -0.275]), peers, True, KEEP_CLEAR, room, WALL_CLEAR,
+                          frozenset({4})) for t in np.arange(0.0, seconds, STEP_S)]
+    assert watch.deadlocks == 1
+    return next((d for d in detours if d is not None), None)
+
+
+def test_a_detour_finds_the_one_way_out_of_a_dead_end(road):
+    """Straight away from car 4's goal is the south wall, and the turns of 45 degrees hit
+    walls or car 5; the road west is the way out."""
+    four = PeerSeen(np.array([-2.13, -0.31]), goal=np.array([2.3, 0.275]),
+                    way=np.array([[-2.13, -0.31], [2.3, 0.275]]))
+    five = PeerSeen(np.array([1.71, 0.26]), at_goal=True, goal=np.array([1.71, 0.26]))
+    position = np.array([2.13, -0.24])
+    detour = yields_from(position, {4: four, 5: five}, road)
+    assert detour is not None
+    assert detour[0] < position[0] - 0.3  # along the road, west
+    assert float(road.distance(detour)) >= WALL_CLEAR
+
+
+def first_detour(peers: dict, room) -> np.ndarray:
+    """Car 2 of the standoff, with ``peers`` seen besides car 1: the detour it gives way to."""
+    watch = DeadlockWatch(2, CONFIG)
+    detours = [watch.goal(t, TWO["position"], TWO["goal"], {1: seen(ONE)} | peers, True, KEEP_CLEAR, room,
+                          WALL_CLEAR) for t in np.arange(0.0, CONFIG.window_s + 1.0, STEP_S)]
+    return next(d for d in detours if d is not None)
+
+
+def test_a_detour_keeps_off_every_peers_goal(room):
+    """Car 3, far off and driving, means to park where car 2 would give way to; a car that
+    gave way there would wall car 3 out of its goal (t-junction-6 seed 49: cars 4 and 6
+    each stood on the other's goal)."""
+    alone = first_detour({}, room)
+    three = PeerSeen(np.array([0.0, 2.5]), goal=alone)
+    detour = first_detour({3: three}, room)
+    assert np.linalg.norm(detour - alone) >= KEEP_CLEAR
+    assert np.linalg.norm(detour - TWO["position"]) == pytest.approx(CONFIG.detour_m)
