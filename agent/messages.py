@@ -42,7 +42,7 @@ replayed are dropped; every drop is counted by reason.
 
 from __future__ import annotations
 
-from collections import Counter
+from collections import Counter, deque
 from dataclasses import dataclass, field
 from typing import Any, Union
 
@@ -341,6 +341,10 @@ def decode(payload: bytes) -> Message:
 # --- the receiving side's state: sender check, order and replay -------------------------------
 
 
+RECENT_PAYLOADS = 8
+"""Accepted payloads kept per sender, to know an identical copy without decoding it."""
+
+
 class Inbox:
     """Accepts decoded messages in order per (sender, kind); counts every drop by reason.
 
@@ -348,11 +352,16 @@ class Inbox:
     a replay or arrived out of order, and is dropped -- unless the sender restarted: a
     sequence that starts over (seq < last) with a stamp later than ``restart_after_s``
     past the last accepted message is accepted as a new session.
+
+    A payload identical to one of the last ``RECENT_PAYLOADS`` accepted from the same
+    sender is not decoded again: it is the same message, judged the same way (a new plan
+    goes out both best effort and reliably, so every car gets most plans twice).
     """
 
     def __init__(self, restart_after_s: float = 2.0):
         self.restart_after_s = restart_after_s
         self._last: dict[tuple[int, str], tuple[int, float]] = {}
+        self._recent: dict[int, deque[tuple[bytes, Message]]] = {}
         self.accepted = Counter()
         self.dropped = Counter()
 
@@ -361,6 +370,10 @@ class Inbox:
         if isinstance(payload, (bytes, bytearray, memoryview)) and len(payload) > MAX_MESSAGE_BYTES:
             self.dropped["oversized"] += 1
             return None
+        recent = self._recent.get(key_sender) if key_sender is not None else None
+        for seen, message in recent or ():
+            if seen == payload:
+                return self._in_order(message)
         try:
             message = decode(payload)
         except MessageError:
@@ -369,6 +382,13 @@ class Inbox:
         if key_sender is not None and message.sender != key_sender:
             self.dropped["spoofed_sender"] += 1
             return None
+        if self._in_order(message) is None:
+            return None
+        if key_sender is not None:
+            self._recent.setdefault(key_sender, deque(maxlen=RECENT_PAYLOADS)).append((bytes(payload), message))
+        return message
+
+    def _in_order(self, message: Message) -> Message | None:
         slot = (message.sender, message.kind)
         last = self._last.get(slot)
         if last is not None:

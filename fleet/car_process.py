@@ -64,6 +64,7 @@ from .car_report import WaitingLog, status_counters, waiting_for, write_stats
 from .command import command_parser, configured, stop_on_signals
 from .command_loop import Report
 from .command_process import CommandProcess
+from .keys import HEARD_BY_CARS
 from .laps import Laps
 
 log = logging.getLogger(__name__)
@@ -259,7 +260,7 @@ class CarProcess:
         """The bus, once it opens (retrying every ``control.retry_s``); None if stopped first."""
         while not self.stop.is_set():
             bus = FleetBus(self.scenario.bus, self.scenario.fleet, self.car.id, listen=self.car.listen,
-                           clock=self.clock)
+                           kinds=HEARD_BY_CARS, clock=self.clock)
             try:
                 bus.open()
                 return bus

@@ -184,3 +184,21 @@ def test_operator_messages_from_several_processes_share_one_order():
     assert inbox.accept(encode(first), key_sender=0) == first
     assert inbox.accept(encode(second), key_sender=0) == second
     assert inbox.accept(encode(first), key_sender=0) is None and inbox.dropped["out_of_order"] == 1
+
+
+def test_an_identical_copy_is_judged_without_decoding_it_again(monkeypatch):
+    """Every new plan comes twice (best effort and reliably): the second copy is the same
+    message, dropped as the same replay, without a second decode."""
+    inbox = Inbox()
+    first, second = encode(plan_message(seq=5)), encode(plan_message(seq=6))
+    decoded = []
+    real_decode = messages.decode
+    monkeypatch.setattr(messages, "decode", lambda payload: decoded.append(payload) or real_decode(payload))
+    assert inbox.accept(first, key_sender=2) is not None
+    assert inbox.accept(memoryview(first), key_sender=2) is None
+    assert inbox.accept(second, key_sender=2) is not None
+    assert inbox.accept(first, key_sender=2) is None  # older than the last: out of order, as decoded
+    assert len(decoded) == 2
+    assert inbox.dropped == {"replayed": 1, "out_of_order": 1}
+    assert inbox.accept(first, key_sender=3) is None and inbox.dropped["spoofed_sender"] == 1  # another key: decoded
+    assert len(decoded) == 3
