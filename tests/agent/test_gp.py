@@ -80,3 +80,19 @@ def test_resampling_preserves_the_trajectory(t0, dt, n):
     again = plan.resampled(t0, dt, n)
     inside = again.times()[again.times() <= plan.t_end]
     assert np.allclose(again.position_at(inside), plan.position_at(inside))
+
+
+def test_one_time_gives_the_numbers_of_many_times():
+    """state_at for a single time takes a plain-float path; it must give the very numbers
+    the array path gives (the bank's runs repeat exactly from the seed)."""
+    rng = np.random.default_rng(7)
+    for _ in range(300):
+        n = int(rng.integers(2, 45))
+        plan = Plan(float(rng.normal() * 5), float(rng.uniform(0.05, 1.0)), rng.normal(size=(n, 2)),
+                    rng.normal(size=(n, 2)))
+        times = [*rng.uniform(plan.t0 - 1.0, plan.t_end + 1.0, 5), plan.t0, plan.t_end, plan.t0 + 2 * plan.dt]
+        many = plan.state_at(np.array(times + [plan.t0 + 0.5 * plan.dt]))
+        for k, t in enumerate(times):
+            for one in (plan.state_at(t), plan.state_at(np.array([t]))):
+                assert one[0].shape == one[1].shape == (1, 2)
+                assert np.array_equal(one[0][0], many[0][k]) and np.array_equal(one[1][0], many[1][k])
