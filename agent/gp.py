@@ -58,6 +58,10 @@ def interpolation_weights(dt: float, fractions: np.ndarray) -> np.ndarray:
     return weights
 
 
+FEW_TIMES = 3
+"""state_at computes up to this many times in plain floats (Plan._state_rows)."""
+
+
 @dataclass(frozen=True)
 class Plan:
     """A car's trajectory: support states at t0 + i*dt, positions and velocities (N, 2)."""
@@ -85,8 +89,9 @@ class Plan:
         position with zero velocity (a plan ends at its goal, standing still).
         """
         t = np.atleast_1d(np.asarray(times, dtype=float))
-        if t.size == 1 and math.isfinite(t.flat[0]):
-            return self._state_at_one(float(t.flat[0]))
+        if t.size <= FEW_TIMES and t.ndim == 1 and all(map(math.isfinite, t.tolist())):
+            rows = [self._state_rows(time) for time in t.tolist()]
+            return np.array([pos for pos, _ in rows]).reshape(-1, 2), np.array([vel for _, vel in rows]).reshape(-1, 2)
         s = (t - self.t0) / self.dt
         index = np.minimum(np.maximum(np.floor(s), 0.0), self.n - 2).astype(np.intp)
         u = np.minimum(np.maximum(s - index, 0.0), 1.0)[:, None]  # np.clip is slower
@@ -113,15 +118,16 @@ class Plan:
             vel[after] = 0.0
         return pos, vel
 
-    def _state_at_one(self, t: float) -> tuple[np.ndarray, np.ndarray]:
-        """state_at for one time, in plain floats: the same operations in the same order,
-        so the same numbers, at a fraction of the cost of numpy's small-array calls (the
-        evidence and the guard ask for one time at a time, tens of thousands of times a run)."""
+    def _state_rows(self, t: float) -> tuple[list[float], list[float]]:
+        """state_at's numbers for one time, in plain floats: the same operations in the
+        same order, so the same numbers, at a fraction of the cost of numpy's calls on
+        small arrays (the evidence and the guard ask for one or two times at a time, tens
+        of thousands of times a run)."""
         s = (t - self.t0) / self.dt
         if s >= self.n - 1:  # after the end, as the general case decides it first
-            return self.positions[-1:].astype(float), np.zeros((1, 2))
+            return self.positions[-1].tolist(), [0.0, 0.0]
         if s <= 0.0:
-            return self.positions[:1].astype(float), self.velocities[:1].astype(float)
+            return self.positions[0].tolist(), self.velocities[0].tolist()
         i = int(min(max(math.floor(s), 0.0), self.n - 2))
         u = min(max(s - i, 0.0), 1.0)
         dt = self.dt
@@ -132,9 +138,8 @@ class Plan:
         h01 = 3 * u2 - 2 * u3
         a, b = (u3 - 2 * u2 + u) * dt, (u3 - u2) * dt
         c, d, e = 6 * (u - u2) / dt, 3 * u2 - 4 * u + 1, 3 * u2 - 2 * u
-        pos = np.array([[p0x + h01 * (p1x - p0x) + a * v0x + b * v1x, p0y + h01 * (p1y - p0y) + a * v0y + b * v1y]])
-        vel = np.array([[c * (p1x - p0x) + d * v0x + e * v1x, c * (p1y - p0y) + d * v0y + e * v1y]])
-        return pos, vel
+        return ([p0x + h01 * (p1x - p0x) + a * v0x + b * v1x, p0y + h01 * (p1y - p0y) + a * v0y + b * v1y],
+                [c * (p1x - p0x) + d * v0x + e * v1x, c * (p1y - p0y) + d * v0y + e * v1y])
 
     def position_at(self, times: np.ndarray | float) -> np.ndarray:
         return self.state_at(times)[0]

@@ -14,6 +14,7 @@ Jacobians need.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -40,6 +41,8 @@ class SignedDistanceField:
         walls (negative), so leaving the arena is always costly.
         """
         points = np.asarray(points, dtype=float)
+        if points.shape == (2,) and math.isfinite(points[0]) and math.isfinite(points[1]):
+            return self._at_point(*points.tolist())
         ny, nx = self.values.shape
         grid = (points - self.origin) / self.cell_m
         np.minimum(np.maximum(grid, 0.0, out=grid), (nx - 1.000001, ny - 1.000001), out=grid)  # np.clip is slower
@@ -61,6 +64,21 @@ class SignedDistanceField:
         np.divide((1 - fy) * (d01 - d00) + fy * (d11 - d10), self.cell_m, out=grad[..., 0])
         np.divide(top - bottom, self.cell_m, out=grad[..., 1])
         return dist, grad
+
+
+    def _at_point(self, x: float, y: float) -> tuple[np.ndarray, np.ndarray]:
+        """distance_and_gradient at one point, in plain floats: the same operations in the
+        same order, so the same numbers (the guard asks for one point at every tick)."""
+        ny, nx = self.values.shape
+        gx = min(max((x - self.origin[0]) / self.cell_m, 0.0), nx - 1.000001)
+        gy = min(max((y - self.origin[1]) / self.cell_m, 0.0), ny - 1.000001)
+        ix, iy = int(gx), int(gy)
+        fx, fy = gx - ix, gy - iy
+        (d00, d01), (d10, d11) = self.values[iy:iy + 2, ix:ix + 2].tolist()
+        bottom = d00 + fx * (d01 - d00)
+        top = d10 + fx * (d11 - d10)
+        return (np.array(bottom + fy * (top - bottom)),
+                np.array([((1 - fy) * (d01 - d00) + fy * (d11 - d10)) / self.cell_m, (top - bottom) / self.cell_m]))
 
 
 def obstacle_mask(world: WorldConfig) -> tuple[np.ndarray, tuple[float, float]]:

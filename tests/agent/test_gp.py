@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 from gtsam.symbol_shorthand import V, X
 
-from trustfg.agent.gp import Plan, interpolation_matrices, interpolation_weights
+from trustfg.agent.gp import FEW_TIMES, Plan, interpolation_matrices, interpolation_weights
 
 
 def random_plan(rng, n=6, t0=1.0, dt=0.7):
@@ -83,8 +83,8 @@ def test_resampling_preserves_the_trajectory(t0, dt, n):
 
 
 def test_one_time_gives_the_numbers_of_many_times():
-    """state_at for a single time takes a plain-float path; it must give the very numbers
-    the array path gives (the bank's runs repeat exactly from the seed)."""
+    """state_at for up to FEW_TIMES times takes a plain-float path; it must give the very
+    numbers the array path gives (the bank's runs repeat exactly from the seed)."""
     rng = np.random.default_rng(7)
     for _ in range(300):
         n = int(rng.integers(2, 45))
@@ -96,3 +96,5 @@ def test_one_time_gives_the_numbers_of_many_times():
             for one in (plan.state_at(t), plan.state_at(np.array([t]))):
                 assert one[0].shape == one[1].shape == (1, 2)
                 assert np.array_equal(one[0][0], many[0][k]) and np.array_equal(one[1][0], many[1][k])
+        few = plan.state_at(np.array(times[:FEW_TIMES]))
+        assert np.array_equal(few[0], many[0][:FEW_TIMES]) and np.array_equal(few[1], many[1][:FEW_TIMES])

@@ -52,3 +52,17 @@ def test_sdf_gradient_points_away_from_obstacles(world):
     assert grad[0, 0] > 0.9 and abs(grad[0, 1]) < 0.2
     # Outside the arena counts as obstacle.
     assert sdf.distance(np.array([[3.0, 0.0]]))[0] < 0
+
+
+def test_one_point_gives_the_numbers_of_many_points():
+    """A single point takes a plain-float path; it must give the very numbers (and shapes)
+    the array path gives, off the grid too (the bank's runs repeat exactly from the seed)."""
+    world = WorldConfig(bounds_m=(-2.0, -2.0, 2.0, 2.0), resolution_m=0.02,
+                        obstacles=(Obstacle(kind="polygon", points=((0.3, -0.6), (0.8, 0.1), (-0.1, 0.3))),))
+    sdf = build_sdf(world)
+    points = np.random.default_rng(5).uniform(-3.0, 3.0, size=(2000, 2))
+    distance, gradient = sdf.distance_and_gradient(points)
+    for k, point in enumerate(points):
+        d, g = sdf.distance_and_gradient(point)
+        assert d.shape == () and g.shape == (2,)
+        assert d == distance[k] and np.array_equal(g, gradient[k])
