@@ -19,9 +19,10 @@ it observes and the plans it hears, at every replan:
 
 Resolution, a yielding rule by priority: in the group, the car with the lowest id keeps
 going for its goal; every other member gives way -- for ``yield_s`` it plans to a detour
-goal ``detour_m`` away, in the free direction (walls, and the other cars as seen) most
-directly away from the ways of the members that go before it (the nearest point of
-their plans and goals), then heads for its goal again. Each
+goal ``detour_m`` away, in the free direction (walls, the other cars as seen and every
+goal heard: a car that gives way onto another's goal walls that one out) most directly
+away from the ways of the members that go before it (the nearest point of their plans
+and goals), turned in steps of DETOUR_TURNS_DEG, then heads for its goal again. Each
 car applies the same rule to nearly the same observations, so the group agrees on who
 goes first without a message; the one that goes first finds room as the others make
 it, and once it has left, the next in line goes first. Each detection counts one
