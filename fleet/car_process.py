@@ -350,6 +350,7 @@ class CarProcess:
             if motion is not None:  # show where we stand until we may go
                 self.agent.plan = standing(motion.position, now)
         else:
+            stepped_aside = self.agent.deadlock.steps_aside
             try:
                 self.agent.replan(now)
             except Exception:  # keep the last plan; the car keeps tracking it
@@ -359,6 +360,9 @@ class CarProcess:
             if parked and not self.agent.at_goal and aside is not None and aside.for_peer is not None:
                 if self.operation.step_aside(now, aside.for_peer):
                     log.info("car %d: %s", self.car.id, self.operation.reason)
+            elif self.agent.deadlock.steps_aside > stepped_aside and aside is not None:
+                log.info("car %d: at its goal, stepping aside for car %d, which it walls in", self.car.id,
+                         aside.for_peer)  # before its trial ended: the trial simply goes on
         own = self.agent.tracks.get(self.car.id)
         motion = own.motion() if own else None
         if self.operation.mode == Mode.DRIVING and motion is not None \
