@@ -65,7 +65,6 @@ class SignedDistanceField:
         np.divide(top - bottom, self.cell_m, out=grad[..., 1])
         return dist, grad
 
-
     def _at_point(self, x: float, y: float) -> tuple[np.ndarray, np.ndarray]:
         """distance_and_gradient at one point, in plain floats: the same operations in the
         same order, so the same numbers (the guard asks for one point at every tick)."""
