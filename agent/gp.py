@@ -89,8 +89,9 @@ class Plan:
         position with zero velocity (a plan ends at its goal, standing still).
         """
         t = np.atleast_1d(np.asarray(times, dtype=float))
-        if t.size <= FEW_TIMES and t.ndim == 1 and all(map(math.isfinite, t.tolist())):
-            rows = [self._state_rows(time) for time in t.tolist()]
+        few = t.tolist() if t.size <= FEW_TIMES and t.ndim == 1 else None
+        if few is not None and all(map(math.isfinite, few)):
+            rows = [self._state_rows(time) for time in few]
             return np.array([pos for pos, _ in rows]).reshape(-1, 2), np.array([vel for _, vel in rows]).reshape(-1, 2)
         s = (t - self.t0) / self.dt
         index = np.minimum(np.maximum(np.floor(s), 0.0), self.n - 2).astype(np.intp)
