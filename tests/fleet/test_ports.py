@@ -22,9 +22,12 @@ def test_a_port_in_use_is_skipped(monkeypatch):
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as busy:
         port = ports.free_port(socket.SOCK_DGRAM)
         busy.bind(("127.0.0.1", port))
-        draws = iter([port, port])
-        monkeypatch.setattr(ports._draw, "randrange", lambda lo, hi: next(draws, lo + 11))
+        draw = ports._draw.randrange
+        forced = [port, port]  # the busy port is drawn twice, then the draw is random again
+        monkeypatch.setattr(ports._draw, "randrange",
+                            lambda lo, hi: forced.pop() if forced else draw(lo, hi))
         assert ports.free_port(socket.SOCK_DGRAM) != port
+        assert forced == []
 
 
 def test_an_unreadable_range_falls_back_to_linux_default(tmp_path):
