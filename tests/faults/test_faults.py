@@ -24,6 +24,7 @@ PLAN_AGE_P50_MS_AT_50 = 300  # at 50 %: fresh most of the time (TCP alone: p50 8
 def test_fault(name, tmp_path):
     case = CASES[name]
     row = run_case(case, seed=0, out=tmp_path / name)
+    print(f"row: {row}")  # whole, on a failure (an assertion's message is cut at 240 characters)
     assert row["crashed"] == [], row
     assert row["breaches"] == 0, row
     if case.link_cut:
