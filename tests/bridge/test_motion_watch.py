@@ -33,3 +33,23 @@ def test_clear_forgets_the_window():
     ticks(watch, 0.0, 2.0, speed=0.0, commanded=0.4)
     watch.clear()
     assert not watch.stuck and not watch.samples
+
+
+def test_a_car_told_again_and_again_to_set_off_that_stands_is_stuck():
+    """Commands that rise from rest at every replan (0 to 0.4 m/s in 0.2 s), none of them
+    reaching the car: on average it is told to drive, so it is stuck."""
+    watch = MotionWatch()
+    for k in range(100):
+        t = k / 50
+        watch.add(t, 0.0, 0.0, 0.4 * ((t % 0.2) / 0.2))
+    assert watch.stuck
+
+
+def test_a_car_that_sets_off_again_and_again_as_told_is_not_stuck():
+    watch, x = MotionWatch(), 0.0
+    for k in range(150):
+        t = k / 50
+        v = 0.4 * ((t % 0.2) / 0.2)
+        x += v / 50
+        watch.add(t, x, 0.0, v)
+    assert not watch.stuck
