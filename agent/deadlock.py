@@ -11,8 +11,12 @@ it observes and the plans it hears, at every replan:
                 that stands, and one that wanders about without getting anywhere
     group       the peers within ``group_radius_m`` and those our last plans failed
                 verification against (in our way, on our goal say, however far), but
-                for those at their goals (as their plan messages name them) or waiting
-                for their departure
+                for those at their goals (as their plan messages name them), waiting
+                for their departure, or stuck (their plan messages say they are told to
+                drive and do not move: a car with its command link cut goes first for
+                ever, and the car that gives way to it gives way for good -- link-cut,
+                car 2 cut at the entry of the intersection: car 3 gave way 4 times in
+                30 s; a stuck car is a standing obstacle, to be planned round)
     deadlock    we are stalled (departed, not at our goal, not giving way already), the
                 group is not empty and every car in it is stalled too: were one of them
                 getting somewhere, we would be waiting for it, not deadlocked
@@ -88,6 +92,8 @@ class PeerSeen:
     it moves away from the nearest of them."""
     halting: bool = False
     """Its plan ends at a standstill short of its goal: it found no way on."""
+    stuck: bool = False
+    """It says it is told to drive and does not move (agent.messages.PlanMessage.stuck)."""
 
 
 @dataclass
@@ -159,7 +165,7 @@ class DeadlockWatch:
             return None
         position = np.asarray(position, float)
         for cid, peer in sorted(peers.items()):
-            if peer.at_goal or peer.waiting or peer.goal is None or not self.stuck(cid, now):
+            if peer.at_goal or peer.waiting or peer.stuck or peer.goal is None or not self.stuck(cid, now):
                 continue
             parked = [(tuple(p.position), keep_clear) for other, p in peers.items() if other != cid and p.at_goal]
             if connected(sdf, peer.position, peer.goal, wall_clear, [*parked, (tuple(position), keep_clear)]):
@@ -202,7 +208,7 @@ class DeadlockWatch:
         if not self.stalled(self.car_id, now):
             return []
         here = self.history[-1][1][self.car_id][0]
-        near = [cid for cid, p in peers.items() if not (p.at_goal or p.waiting)
+        near = [cid for cid, p in peers.items() if not (p.at_goal or p.waiting or p.stuck)
                 and (cid in blockers or np.linalg.norm(p.position - here) <= self.config.group_radius_m)]
         if not all(self.stalled(cid, now) for cid in near):
             return []
@@ -253,7 +259,8 @@ def peers_seen(tracks: dict, views: dict, own_id: int, now: float, arrival_radiu
             way = way if goal is None else np.vstack([way, goal])
             halting = (goal is not None and plan.n > 0 and float(np.linalg.norm(plan.velocities[-1])) < MOVING_MPS
                        and float(np.linalg.norm(plan.positions[-1] - goal)) > arrival_radius_m)
-        seen[car_id] = PeerSeen(motion.position, at_goal, waiting, goal, way, halting)
+        stuck = bool(view and view.latest is not None and view.latest.stuck)
+        seen[car_id] = PeerSeen(motion.position, at_goal, waiting, goal, way, halting, stuck)
     return seen
 
 

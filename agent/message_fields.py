@@ -13,9 +13,11 @@ class MessageError(ValueError):
     """A payload is not a valid trustfg message."""
 
 
-def only(body: dict, allowed: set[str], common: bool = True) -> None:
+def only(body: dict, allowed: set[str], common: bool = True, optional: frozenset[str] = frozenset()) -> None:
+    """Every key of ``allowed`` (and the common keys) present, ``optional`` ones may be,
+    nothing else."""
     expected = allowed | ({"v", "k", "id", "seq", "t"} if common else set())
-    extra = set(body) - expected
+    extra = set(body) - expected - optional
     if extra:
         raise MessageError(f"unexpected field(s) {sorted(map(str, extra))}")
     missing = expected - set(body)

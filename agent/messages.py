@@ -16,7 +16,9 @@ Every message is a msgpack map with these common keys:
 and per kind:
 
     plan    t0 float, dt float > 0, pos [x0, y0, x1, y1, ...] (2N floats, 2 <= N <= 256),
-            vel [...] (2N floats), goal [x, y]
+            vel [...] (2N floats), goal [x, y]; and only when true, stuck true: the car
+            is told to drive and does not move (bridge.motion_watch), its plan stands
+            where it stands -- no car to give way to (agent.deadlock)
     trust   peers {peer_id: {a: [3 floats >= 0], b: [3 floats >= 0], tau: [3 floats in
             [0, 1]], trust: float in [0, 1], eps: float > 0}}; a/b are the sender's DIRECT
             evidence (safety, consistency, transparency) -- testimonies never carry fused
@@ -76,6 +78,8 @@ class PlanMessage:
     stamp: float
     plan: Plan
     goal: tuple[float, float]
+    stuck: bool = False
+    """The car does not move although it is told to (its plan stands where it stands)."""
 
     kind = "plan"
 
@@ -201,6 +205,8 @@ def encode(message: Message) -> bytes:
                     pos=[float(x) for x in np.asarray(message.plan.positions).ravel()],
                     vel=[float(x) for x in np.asarray(message.plan.velocities).ravel()],
                     goal=[float(message.goal[0]), float(message.goal[1])])
+        if message.stuck:
+            body["stuck"] = True
     elif isinstance(message, TrustReport):
         body["peers"] = {
             int(peer): {"a": [float(x) for x in pt.alpha], "b": [float(x) for x in pt.beta],
@@ -285,7 +291,7 @@ def decode(payload: bytes) -> Message:
             departures[car] = (_float(entry, "depart"), _float(entry, "cruise", 1e-3, 10.0))
         return StartMessage(seq, stamp, trial, departures)
     if kind == "plan":
-        _only(body, {"t0", "dt", "pos", "vel", "goal"})
+        _only(body, {"t0", "dt", "pos", "vel", "goal"}, optional=frozenset({"stuck"}))
         t0 = _float(body, "t0")
         dt = _float(body, "dt", low=1e-4, high=60.0)
         pos = _floats(body, "pos", 4, 2 * MAX_PLAN_STATES)
@@ -295,7 +301,8 @@ def decode(payload: bytes) -> Message:
         goal = _floats(body, "goal", 2, 2)
         plan = Plan(t0=t0, dt=dt, positions=np.array(pos).reshape(-1, 2),
                     velocities=np.array(vel).reshape(-1, 2))
-        return PlanMessage(sender, seq, stamp, plan, (goal[0], goal[1]))
+        stuck = _bool(body, "stuck") if "stuck" in body else False
+        return PlanMessage(sender, seq, stamp, plan, (goal[0], goal[1]), stuck)
     if kind == "trust":
         _only(body, {"peers"})
         peers_raw = body.get("peers")
@@ -410,6 +417,8 @@ def to_dict(message: Message) -> dict[str, Any]:
         out.update(t0=message.plan.t0, dt=message.plan.dt, goal=list(message.goal),
                    positions=np.asarray(message.plan.positions).tolist(),
                    velocities=np.asarray(message.plan.velocities).tolist())
+        if message.stuck:
+            out["stuck"] = True
     elif isinstance(message, TrustReport):
         out["peers"] = {str(peer): {"alpha": list(pt.alpha), "beta": list(pt.beta), "tau": list(pt.tau),
                                     "trust": pt.trust, "epsilon": pt.epsilon}
@@ -436,7 +445,7 @@ def from_dict(data: dict[str, Any]) -> Message:
         if kind == "plan":
             message: Message = PlanMessage(sender, seq, stamp, Plan(data["t0"], data["dt"], np.array(data["positions"], dtype=float),
                                                                     np.array(data["velocities"], dtype=float)),
-                                           tuple(data["goal"]))
+                                           tuple(data["goal"]), bool(data.get("stuck", False)))
         elif kind == "trust":
             message = TrustReport(sender, seq, stamp, {
                 int(peer): PeerTrust(tuple(p["alpha"]), tuple(p["beta"]), tuple(p["tau"]), p["trust"], p["epsilon"])

@@ -383,7 +383,7 @@ class CarProcess:
         own = self.agent.tracks.get(self.car.id)
         motion = own.motion() if own else None
         if outgoing is not None and self.stuck and motion is not None:  # the truth: standing still
-            outgoing = dataclasses.replace(outgoing, plan=standing(motion.position, now))
+            outgoing = dataclasses.replace(outgoing, plan=standing(motion.position, now), stuck=True)
         if outgoing is not None:
             bus.publish("plan", messages.encode(outgoing), repeat=repeat)
 

@@ -36,14 +36,14 @@ def seen(car: dict, moved: float = 0.0) -> PeerSeen:
 
 
 def watch_for(me: int, watch: DeadlockWatch, seconds: float, room, peer_moves: float = 0.0,
-              peer_at_goal: bool = False) -> list:
+              peer_at_goal: bool = False, peer_stuck: bool = False) -> list:
     """Feed ``watch`` (car ``me``) the standoff for ``seconds``; the detours it returns."""
     mine, theirs, other = (ONE, TWO, 2) if me == 1 else (TWO, ONE, 1)
     detours = []
     for k, t in enumerate(np.arange(0.0, seconds, STEP_S)):
         peer = seen(theirs, moved=peer_moves * k * STEP_S)
-        if peer_at_goal:
-            peer = dataclasses.replace(peer, at_goal=True)
+        if peer_at_goal or peer_stuck:
+            peer = dataclasses.replace(peer, at_goal=peer_at_goal, stuck=peer_stuck)
         detours.append(watch.goal(t, mine["position"], mine["goal"], {other: peer}, True,
                                   KEEP_CLEAR, room, WALL_CLEAR))
     return detours
@@ -80,6 +80,14 @@ def test_a_peer_at_its_goal_makes_no_group(room):
     two = DeadlockWatch(2, CONFIG)
     watch_for(2, two, CONFIG.window_s + 1.0, room, peer_at_goal=True)
     assert two.deadlocks == 0
+
+
+def test_a_stuck_peer_makes_no_group_and_nobody_gives_way_to_it(room):
+    """A car that says it does not move although told to (its command link cut) would go
+    first for ever: it is planned round like a wall, not given way to."""
+    two = DeadlockWatch(2, CONFIG)
+    detours = watch_for(2, two, CONFIG.window_s + CONFIG.yield_s + 1.0, room, peer_stuck=True)
+    assert two.deadlocks == 0 and two.yields == 0 and all(d is None for d in detours)
 
 
 def test_the_detour_ends_after_yield_s_and_needs_a_fresh_window(room):

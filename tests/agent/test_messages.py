@@ -55,6 +55,16 @@ def test_round_trip(message):
         assert again == message
 
 
+def test_a_stuck_plan_says_so_and_a_plan_without_the_field_is_not_stuck():
+    stuck = PlanMessage(2, 1, 10.01, plan_message().plan, (0.4, 2.15), stuck=True)
+    assert decode(encode(stuck)).stuck is True
+    assert "stuck" not in msgpack.unpackb(encode(plan_message()))  # the field only when true
+    assert decode(encode(plan_message())).stuck is False
+    assert messages.from_dict(messages.to_dict(stuck)).stuck is True
+    with pytest.raises(MessageError, match="stuck"):
+        decode(mutate(stuck, stuck=1))
+
+
 def test_golden_bytes_of_a_pose():
     """The wire format is a contract with other implementations: pin one encoding."""
     payload = encode(PoseMessage(4, 99, 13.0, 0.5, -2.0, 1.5, True))
