@@ -257,6 +257,8 @@ class _Loop:
                 sender.send(command.v, command.omega, flags)
                 if self.motion.add(now, pose[0], pose[1], command.v):
                     self._publish("stuck", float(self.motion.stuck))
+                    log.info("car %d: %s: %s", self.car.id, "stuck" if self.motion.stuck else "moving again",
+                             self.motion.why)
         control.sent += 1
         for name in ("sent", "stops", "stale_pose_stops", "guard_limited", "ticks"):
             self._publish(name, getattr(control, name))

@@ -53,3 +53,16 @@ def test_a_car_that_sets_off_again_and_again_as_told_is_not_stuck():
         x += v / 50
         watch.add(t, x, 0.0, v)
     assert not watch.stuck
+
+
+def test_a_car_told_to_set_off_late_in_the_window_is_not_stuck_for_its_lag():
+    """Told nothing for 0.55 s, then 0.4 m/s; the car follows 0.1 s late at 1.5 m/s^2:
+    on average over the window it was told 0.125 m/s and has moved at 0.02 m/s."""
+    watch, x, v = MotionWatch(), 0.0, 0.0
+    for k in range(int(STUCK_AFTER_S * 50)):
+        t = k / 50
+        told = 0.4 if t >= 0.55 else 0.0
+        v = min(v + 1.5 / 50, told) if t >= 0.65 else 0.0
+        x += v / 50
+        watch.add(t, x, 0.0, told)
+    assert not watch.stuck
