@@ -16,6 +16,9 @@ Cases (t = seconds after the start; car 2 is the victim where one car suffers):
     mocap-drop-30  30 % of NatNet frames dropped (mocap-sim)
     occlusion      car 2's rigid body untracked for 1 s (once it drives, from t = 4 s)
     link-cut       car 2's command datagrams dropped from then to the end (nftables)
+    link-cut-entry the same, from when car 2 enters the crossing (x >= -0.55 m): it comes
+                   to rest in car 3's lane, and the others must go round it (a car that
+                   cannot move is no car to give way to: agent.deadlock)
     lossy-clock    loss-30 and delay-50ms together, and car 2's process on a clock 0.3 s
                    ahead of the fleet's: honest cars must stay trusted (>= 0.8 after 3 s)
 
@@ -128,6 +131,29 @@ def when_moving(action: Callable[["Setup", RunContext], None]) -> Callable[["Set
     return run_when_moving
 
 
+ENTRY_X = -0.55
+"""Car 2 drives east along y = -0.4; the crossing starts at x = -0.8 and car 3's lane
+(southbound) is x = -0.4: cut here, car 2 stops in that lane (0.25 s watchdog, then
+braking at 1.5 m/s^2: about 0.25 m further on at 0.55 m/s)."""
+
+
+def when_entering(action: Callable[["Setup", RunContext], None]) -> Callable[["Setup", RunContext], float | None]:
+    """Run ``action`` once the victim drives into the crossing (x >= ENTRY_X); until
+    then ask again in 0.05 s."""
+    def run_when_entering(setup: "Setup", context: RunContext) -> float | None:
+        where = context.position(VICTIM)
+        if where is None or where[0] < ENTRY_X or context.speed(VICTIM) < 0.15:
+            return 0.05
+        action(setup, context)
+        return None
+    return run_when_entering
+
+
+def _cut_link(setup: "Setup", context: RunContext) -> None:
+    setup.lab.cut_link(VICTIM, _link_port(setup))
+    context.note(f"fault: cut car {VICTIM}'s command link")
+
+
 def _kill(setup: Setup, context: RunContext) -> None:
     context.processes.kill(f"car {VICTIM}")
     setup.killed_at = time.time()
@@ -177,9 +203,10 @@ CASES = {case.name: case for case in [
     Case("occlusion", schedule=[(4.0, when_moving(lambda s, c: (
         s.control({"occlude": VICTIM, "seconds": 1.0}), c.note(f"fault: occlude car {VICTIM} for 1 s"))))],
         measures_stop=True),
-    Case("link-cut", schedule=[(4.0, when_moving(lambda s, c: (
-        s.lab.cut_link(VICTIM, _link_port(s)), c.note(f"fault: cut car {VICTIM}'s command link")))),
-        (4.0, _end_once_the_others_arrive)], measures_stop=True, link_cut=True),
+    Case("link-cut", schedule=[(4.0, when_moving(_cut_link)), (4.0, _end_once_the_others_arrive)],
+         measures_stop=True, link_cut=True),
+    Case("link-cut-entry", schedule=[(0.0, when_entering(_cut_link)), (4.0, _end_once_the_others_arrive)],
+         measures_stop=True, link_cut=True),
     Case("lossy-clock", prepare=_skewed_clock,
          schedule=[(0.0, lambda s, c: [s.lab.loss(car, 30) for car in s.lab.car_ids])]),
 ]}

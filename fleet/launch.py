@@ -142,6 +142,11 @@ class RunContext:
         a, b = poses
         return float(np.hypot(b.x - a.x, b.y - a.y) / (b.stamp - a.stamp))
 
+    def position(self, car_id: int) -> tuple[float, float] | None:
+        """The car's position as its last published pose tells (None if unknown)."""
+        poses = self.recorder.poses.get(car_id, ()) if self.recorder else ()
+        return (poses[-1].x, poses[-1].y) if poses else None
+
     def car_args(self, car_id: int) -> list[str]:
         return ["car", "--id", str(car_id), "--config", str(self.config_path),
                 "--stats", str(self.out / f"car_{car_id}.json")]

@@ -1,7 +1,7 @@
 """The fault matrix, one run per fault: every car process in its own network namespace.
 
 Needs root (ip netns, nftables): skipped with the reason otherwise. The expectations are
-those of the faults issue; mocap_sim/faults.py documents how each number is measured.
+those of the faults issue; fleet/faults.py documents how each number is measured.
 """
 
 import pytest
