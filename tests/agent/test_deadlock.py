@@ -6,9 +6,13 @@ import dataclasses
 import numpy as np
 import pytest
 
-from trustfg.agent.config import DeadlockConfig, Obstacle, WorldConfig
-from trustfg.agent.deadlock import DeadlockWatch, PeerSeen
+from trustfg.agent.config import DeadlockConfig, Obstacle, TrustConfig, WorldConfig
+from trustfg.agent.deadlock import DeadlockWatch, PeerSeen, peers_seen
+from trustfg.agent.evidence import PeerView
+from trustfg.agent.gp import standing
+from trustfg.agent.messages import PlanMessage
 from trustfg.agent.routes import connected
+from trustfg.agent.track import Track
 from trustfg.agent.world import build_sdf
 
 CONFIG = DeadlockConfig()
@@ -251,3 +255,14 @@ def test_a_detour_keeps_off_every_peers_goal(room):
     detour = first_detour({3: three}, room)
     assert np.linalg.norm(detour - alone) >= KEEP_CLEAR
     assert np.linalg.norm(detour - TWO["position"]) == pytest.approx(CONFIG.detour_m)
+
+
+def test_a_peer_is_seen_stuck_exactly_when_its_latest_plan_says_so():
+    track = Track()
+    for k in range(20):
+        track.add(1.0 + 0.01 * k, 0.5, -0.4, 0.0)
+    view = PeerView(TrustConfig())
+    for stuck in (True, False):
+        view.latest = PlanMessage(2, 1, 1.19, standing(np.array([0.5, -0.4]), 1.19), (2.15, -0.4), stuck)
+        seen = peers_seen({2: track}, {2: view}, own_id=3, now=1.2, arrival_radius_m=0.1)
+        assert seen[2].stuck is stuck and not seen[2].at_goal
