@@ -120,15 +120,27 @@ def _skewed_clock(setup: Setup) -> None:
         dataclasses.replace(c, clock_offset_s=0.3) if c.id == VICTIM else c for c in setup.fleet.cars))
 
 
-def when_moving(action: Callable[["Setup", RunContext], None]) -> Callable[["Setup", RunContext], float | None]:
-    """Run ``action`` once the victim is driving (a fault on a car that waits at its start
-    shows nothing); until then ask again in 0.1 s."""
-    def run_when_moving(setup: "Setup", context: RunContext) -> float | None:
-        if context.speed(VICTIM) < 0.15:
-            return 0.1
+Action = Callable[["Setup", RunContext], None]
+Scheduled = Callable[["Setup", RunContext], float | None]
+
+DRIVING_MPS = 0.15
+"""The victim counts as driving above this speed."""
+
+
+def when(ready: Callable[[RunContext], bool], action: Action, retry_s: float) -> Scheduled:
+    """Run ``action`` once ``ready``; until then ask again in ``retry_s``."""
+    def run_when_ready(setup: "Setup", context: RunContext) -> float | None:
+        if not ready(context):
+            return retry_s
         action(setup, context)
         return None
-    return run_when_moving
+    return run_when_ready
+
+
+def when_moving(action: Action) -> Scheduled:
+    """Run ``action`` once the victim is driving (a fault on a car that waits at its start
+    shows nothing); until then ask again in 0.1 s."""
+    return when(lambda context: context.speed(VICTIM) >= DRIVING_MPS, action, 0.1)
 
 
 ENTRY_X = -0.55
@@ -137,16 +149,13 @@ ENTRY_X = -0.55
 braking at 1.5 m/s^2: about 0.25 m further on at 0.55 m/s)."""
 
 
-def when_entering(action: Callable[["Setup", RunContext], None]) -> Callable[["Setup", RunContext], float | None]:
+def when_entering(action: Action) -> Scheduled:
     """Run ``action`` once the victim drives into the crossing (x >= ENTRY_X); until
     then ask again in 0.05 s."""
-    def run_when_entering(setup: "Setup", context: RunContext) -> float | None:
+    def entering(context: RunContext) -> bool:
         where = context.position(VICTIM)
-        if where is None or where[0] < ENTRY_X or context.speed(VICTIM) < 0.15:
-            return 0.05
-        action(setup, context)
-        return None
-    return run_when_entering
+        return where is not None and where[0] >= ENTRY_X and context.speed(VICTIM) >= DRIVING_MPS
+    return when(entering, action, 0.05)
 
 
 def _cut_link(setup: "Setup", context: RunContext) -> None:
