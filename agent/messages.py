@@ -205,8 +205,8 @@ def encode(message: Message) -> bytes:
                     pos=[float(x) for x in np.asarray(message.plan.positions).ravel()],
                     vel=[float(x) for x in np.asarray(message.plan.velocities).ravel()],
                     goal=[float(message.goal[0]), float(message.goal[1])])
-        if message.stuck:
-            body["stuck"] = True
+        if message.stuck is not False:  # as given: a recording's value meets decode's check
+            body["stuck"] = message.stuck
     elif isinstance(message, TrustReport):
         body["peers"] = {
             int(peer): {"a": [float(x) for x in pt.alpha], "b": [float(x) for x in pt.beta],
@@ -445,7 +445,7 @@ def from_dict(data: dict[str, Any]) -> Message:
         if kind == "plan":
             message: Message = PlanMessage(sender, seq, stamp, Plan(data["t0"], data["dt"], np.array(data["positions"], dtype=float),
                                                                     np.array(data["velocities"], dtype=float)),
-                                           tuple(data["goal"]), bool(data.get("stuck", False)))
+                                           tuple(data["goal"]), data.get("stuck", False))
         elif kind == "trust":
             message = TrustReport(sender, seq, stamp, {
                 int(peer): PeerTrust(tuple(p["alpha"]), tuple(p["beta"]), tuple(p["tau"]), p["trust"], p["epsilon"])

@@ -63,6 +63,8 @@ def test_a_stuck_plan_says_so_and_a_plan_without_the_field_is_not_stuck():
     assert messages.from_dict(messages.to_dict(stuck)).stuck is True
     with pytest.raises(MessageError, match="stuck"):
         decode(mutate(stuck, stuck=1))
+    with pytest.raises(MessageError, match="stuck"):  # a recording goes through the same check
+        messages.from_dict(messages.to_dict(stuck) | {"stuck": "yes"})
 
 
 def test_golden_bytes_of_a_pose():
