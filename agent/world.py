@@ -31,8 +31,14 @@ class SignedDistanceField:
     values: np.ndarray
 
     def distance(self, points: np.ndarray) -> np.ndarray:
-        """Signed distance at points of shape (..., 2)."""
-        return self.distance_and_gradient(points)[0]
+        """Signed distance at points of shape (..., 2): distance_and_gradient's d, without
+        the gradient (the same operations, so the same numbers)."""
+        points = np.asarray(points, dtype=float)
+        if points.shape == (2,) and math.isfinite(points[0]) and math.isfinite(points[1]):
+            return self._at_point(*points.tolist())[0]
+        fx, fy, d00, d01, d10, d11 = self._corners(points)
+        bottom = d00 + fx * (d01 - d00)
+        return bottom + fy * (d10 + fx * (d11 - d10) - bottom)
 
     def distance_and_gradient(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Bilinear d(z) and its gradient at points (..., 2) -> (...,), (..., 2).
@@ -43,19 +49,7 @@ class SignedDistanceField:
         points = np.asarray(points, dtype=float)
         if points.shape == (2,) and math.isfinite(points[0]) and math.isfinite(points[1]):
             return self._at_point(*points.tolist())
-        ny, nx = self.values.shape
-        grid = (points - self.origin) / self.cell_m
-        np.minimum(np.maximum(grid, 0.0, out=grid), (nx - 1.000001, ny - 1.000001), out=grid)  # np.clip is slower
-        gx, gy = grid[..., 0], grid[..., 1]
-        ix = gx.astype(np.intp)
-        iy = gy.astype(np.intp)
-        fx = gx - ix
-        fy = gy - iy
-        v = self.values
-        d00 = v[iy, ix]
-        d01 = v[iy, ix + 1]
-        d10 = v[iy + 1, ix]
-        d11 = v[iy + 1, ix + 1]
+        fx, fy, d00, d01, d10, d11 = self._corners(points)
         # d = (1-fy)[(1-fx) d00 + fx d01] + fy[(1-fx) d10 + fx d11]
         bottom = d00 + fx * (d01 - d00)
         top = d10 + fx * (d11 - d10)
@@ -64,6 +58,22 @@ class SignedDistanceField:
         np.divide((1 - fy) * (d01 - d00) + fy * (d11 - d10), self.cell_m, out=grad[..., 0])
         np.divide(top - bottom, self.cell_m, out=grad[..., 1])
         return dist, grad
+
+    def _corners(self, points: np.ndarray) -> tuple[np.ndarray, ...]:
+        """The fractions (fx, fy) of each point within its cell and d at the cell's four
+        corners, d00 (its own), d01 (+x), d10 (+y), d11."""
+        ny, nx = self.values.shape
+        grid = (points - self.origin) / self.cell_m
+        np.minimum(np.maximum(grid, 0.0, out=grid), (nx - 1.000001, ny - 1.000001), out=grid)  # np.clip is slower
+        if np.isnan(grid).any():  # (infinities are clamped to the border above)
+            raise ValueError("signed distance asked at a point that is not a number")
+        gx, gy = grid[..., 0], grid[..., 1]
+        ix = gx.astype(np.intp)
+        iy = gy.astype(np.intp)
+        flat = self.values.ravel()  # a view; one flat index per corner is cheaper than [iy, ix]
+        cell = iy * nx + ix
+        return (gx - ix, gy - iy, flat.take(cell), flat.take(cell + 1), flat.take(cell + nx),
+                flat.take(cell + nx + 1))
 
     def _at_point(self, x: float, y: float) -> tuple[np.ndarray, np.ndarray]:
         """distance_and_gradient at one point, in plain floats: the same operations in the

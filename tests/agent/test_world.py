@@ -66,3 +66,26 @@ def test_one_point_gives_the_numbers_of_many_points():
         d, g = sdf.distance_and_gradient(point)
         assert d.shape == () and g.shape == (2,)
         assert d == distance[k] and np.array_equal(g, gradient[k])
+
+
+def test_distance_alone_gives_the_numbers_of_distance_and_gradient(world):
+    """``distance`` skips the gradient; its numbers must be those of distance_and_gradient,
+    on the grid, off it and in every shape (the bank's runs repeat exactly from the seed)."""
+    sdf = build_sdf(world)
+    rng = np.random.default_rng(6)
+    for shape in [(2000, 2), (40, 5, 2), (1, 2), (3, 1, 2)]:
+        points = rng.uniform(-3.5, 3.5, shape)
+        alone = sdf.distance(points)
+        assert alone.shape == shape[:-1]
+        assert np.array_equal(alone, sdf.distance_and_gradient(points)[0])
+
+
+@pytest.mark.parametrize("point", [(np.nan, 0.0), (0.0, np.nan), (np.nan, np.nan)])
+def test_a_point_that_is_not_a_number_is_refused(world, point):
+    """Not a wrong distance: with one coordinate NaN a flat index can land on a real cell."""
+    sdf = build_sdf(world)
+    for points in (np.array(point), np.array([[0.1, 0.2], point])):
+        with pytest.raises(ValueError, match="not a number"):
+            sdf.distance(points)
+        with pytest.raises(ValueError, match="not a number"):
+            sdf.distance_and_gradient(points)
