@@ -53,6 +53,8 @@ from .world import SignedDistanceField
 RAY_STEP_M = 0.02
 RAY_LENGTH_M = 1.5
 """Beyond the stopping distance from any speed the car can reach (0.8 m/s: 0.4 m)."""
+RAY_STEPS = np.arange(1, int(RAY_LENGTH_M / RAY_STEP_M) + 1) * RAY_STEP_M
+"""Distances ahead of the centre at which a ray is checked (the guard asks at every tick)."""
 TURN_STEP_RAD = math.radians(15.0)
 """A turning car is checked at headings this far apart over its turn."""
 
@@ -113,8 +115,7 @@ def stopping_speed(room: float, config: GuardConfig, t_r: float) -> float:
 def wall_room(x: float, y: float, yaw: float, sdf: SignedDistanceField, keep_m: float) -> float:
     """How far the centre can go straight ahead before it comes closer to a wall than
     ``keep_m`` (or than it is now, if nearer); inf if free for RAY_LENGTH_M."""
-    steps = np.arange(1, int(RAY_LENGTH_M / RAY_STEP_M) + 1) * RAY_STEP_M
-    ray = np.array([x, y]) + steps[:, None] * np.array([math.cos(yaw), math.sin(yaw)])
+    ray = np.array([x, y]) + RAY_STEPS[:, None] * np.array([math.cos(yaw), math.sin(yaw)])
     limit = min(keep_m, float(sdf.distance(np.array([x, y]))) - 1e-3)
     blocked = np.flatnonzero(sdf.distance(ray) < limit)
-    return math.inf if blocked.size == 0 else float(steps[blocked[0]] - RAY_STEP_M)
+    return math.inf if blocked.size == 0 else float(RAY_STEPS[blocked[0]] - RAY_STEP_M)
