@@ -26,6 +26,7 @@ Replanning is warm-started from the previous plan resampled on the new time grid
 from __future__ import annotations
 
 import dataclasses
+import functools
 import time
 from dataclasses import dataclass
 
@@ -262,10 +263,19 @@ SEED_PACES = (1.0, 0.6, 1.6, 2.4)
 
 def _values(plan: Plan) -> gtsam.Values:
     values = gtsam.Values()
-    for i in range(plan.n):
-        values.insert(X(i), plan.positions[i])
-        values.insert(V(i), plan.velocities[i])
+    insert = values.insert
+    positions, velocities = _state_keys(plan.n)
+    for key, position in zip(positions, plan.positions):
+        insert(key, position)
+    for key, velocity in zip(velocities, plan.velocities):
+        insert(key, velocity)
     return values
+
+
+@functools.lru_cache(maxsize=8)
+def _state_keys(n: int) -> tuple[tuple[int, ...], tuple[int, ...]]:
+    """The keys p_i = X(i) and v_i = V(i), i < n (made once: a replan builds Values often)."""
+    return tuple(X(i) for i in range(n)), tuple(V(i) for i in range(n))
 
 
 def seed_plan(request: PlanRequest, t0: float, dt: float, n: int, pace: float = 1.0) -> Plan:
