@@ -100,11 +100,13 @@ class BatchedIntervals:
             # states l and l + 1 (keys 2l .. 2l + 3).
             c = min(self._per_factor, end - first)
             count = (end - first) // c
-            own = blocks[first:end].reshape(count, c, 4, rows, 2)
-            dense = np.zeros((count, 2 * (c + 1), c, rows, 2))
+            own = blocks[first:end].reshape(count, c, 4, rows, 2).transpose(0, 1, 2, 4, 3)
+            # Laid out axis before row, so that each block, (c * rows, 2), is in column-major
+            # order: Eigen's, which GTSAM then takes without reordering it.
+            dense = np.zeros((count, 2 * (c + 1), 2, c, rows))
             for local in range(c):
-                dense[:, 2 * local:2 * local + 4, local] = own[:, local]
-            self._blocks.extend(dense.reshape(count, 2 * (c + 1), c * rows, 2))
+                dense[:, 2 * local:2 * local + 4, :, local] = own[:, local]
+            self._blocks.extend(dense.reshape(count, 2 * (c + 1), 2, c * rows).transpose(0, 1, 3, 2))
             self._residuals.extend(residual[first:end].reshape(count, c * rows))
         self._jacobians = [None] * len(self.chunks)
         self._values = gtsam.Values(values)
