@@ -24,7 +24,6 @@ from __future__ import annotations
 from collections import deque
 from dataclasses import dataclass, field
 
-
 MAX_SAMPLES = 512
 """At most this many samples are kept per peer (the window's, bounded)."""
 
