@@ -36,6 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import interval_kernel
 from .world import SignedDistanceField
 
 SMOOTH_ACCEL_DELTA = 0.2
@@ -136,8 +137,9 @@ def check_residuals(p: np.ndarray, v: np.ndarray, peer_positions: np.ndarray,
 
     Returns the residuals (..., R) with R = M + 2 (+ 2 with a lane) rows [obstacle,
     peer 1..M, speed, lane x, lane y] and their derivatives d/dp and d/dv, (..., R, 2).
-    Written into preallocated arrays with few numpy calls: the planner evaluates a few
-    hundred checks per call, where each numpy call's overhead outweighs its arithmetic.
+    The readable form of the checks: the planner's reference construction (``gtsam``
+    interpolation) calls it per check, and agent.interval_kernel, which the planner
+    uses, is tested against it.
     """
     m = peer_positions.shape[-2]
     lane_rows = 2 if lane is not None and len(lane) else 0
@@ -176,52 +178,23 @@ def check_residuals(p: np.ndarray, v: np.ndarray, peer_positions: np.ndarray,
 def evaluate_intervals(problem: IntervalProblem, positions: np.ndarray, velocities: np.ndarray,
                        intervals: np.ndarray | None = None, jacobians: bool = True
                        ) -> tuple[np.ndarray, np.ndarray | None]:
-    """Residuals (I, R) and Jacobians (I, R, 4, 2) of the given intervals, vectorised.
+    """Residuals (I, R) and Jacobians (I, R, 4, 2) of the given intervals.
 
     ``positions``/``velocities`` are the support states (N, 2); ``intervals`` selects which
     intervals i (default: all N-1). Jacobian block j of a row is d(row)/d(state j) with
-    states ordered (p_i, v_i, p_{i+1}, v_{i+1}).
+    states ordered (p_i, v_i, p_{i+1}, v_{i+1}): the chain rule through the interpolation,
+    d row/d state_j = d row/dp w_pos[k, j] + d row/dv w_vel[k, j]. The rows are those of
+    check_residuals at each interpolated check, then the consistency row; computed in one
+    compiled loop (agent.interval_kernel), whose tests hold it to check_residuals.
     """
-    support = np.concatenate([positions, velocities], axis=1)  # (N, 4): p, v per row
     if intervals is None:
-        intervals = slice(None)
-        left, right = support[:-1], support[1:]
-    else:
-        left, right = support[intervals], support[intervals + 1]
-    # States of each interval as (I, 4, 2): p_i, v_i, p_{i+1}, v_{i+1}.
-    states = np.concatenate([left, right], axis=1).reshape(-1, 4, 2)
-    n_int, k = len(states), problem.n_checks
-    pv = problem.weights.reshape(2 * k, 4) @ states  # (I, 2K, 2): GP-interpolated p, v per check
-    p, v = pv[:, 0::2], pv[:, 1::2]
-    r, d_dp, d_dv = check_residuals(p, v, problem.peer_positions[intervals], problem.epsilons,
-                                    problem.sdf, problem.epsilon_obstacle, problem.max_speed,
-                                    problem.lane)
-    consistency = problem.consistency_targets is not None
-    residual = np.empty((n_int, problem.rows))
-    residual[:, :r[0].size] = r.reshape(n_int, -1)
-    if consistency:
-        # |a|_delta - abar with a = (v_{i+1} - v_i)/dt.
-        a = (states[:, 3] - states[:, 1]) / problem.dt  # (I, 2)
-        root = np.sqrt(np.einsum("id,id->i", a, a) + SMOOTH_ACCEL_DELTA**2)
-        excess = root - SMOOTH_ACCEL_DELTA - problem.consistency_targets[intervals]
-        np.maximum(excess, 0.0, out=residual[:, -1])
-    if not jacobians:
-        return residual, None
-    # Chain rule through the interpolation: d row/d state_j = d_dp w_pos[k, j] + d_dv w_vel[k, j],
-    # built as (I, 4, R, 2) -- state block first, the layout the planner hands to GTSAM.
-    weights = problem.weights.transpose(1, 2, 0)[:, :, :, None, None]  # (2, 4, K, 1, 1)
-    blocks = np.empty((n_int, 4, problem.rows, 2))
-    checks = blocks[:, :, :r[0].size].reshape(n_int, 4, k, -1, 2)
-    np.multiply(d_dp[:, None], weights[0], out=checks)
-    speed = problem.n_peers + 1  # the only row that depends on v
-    checks[:, :, :, speed] += d_dv[:, None, :, speed] * weights[1][..., 0]
-    if consistency:
-        da = a * ((excess > 0.0) / root / problem.dt)[:, None]  # d/dv_{i+1}
-        blocks[:, :, -1] = 0.0
-        blocks[:, 1, -1] = -da
-        blocks[:, 3, -1] = da
-    jac = blocks.transpose(0, 2, 1, 3)  # (I, R, 4, 2), a view
-    return residual, jac
+        intervals = np.arange(len(positions) - 1)
+    residual, blocks = interval_kernel.evaluate(
+        positions, velocities, np.asarray(intervals, dtype=np.int64), problem.weights, problem.peer_positions,
+        problem.epsilons, problem.sdf.values, problem.sdf.origin, problem.sdf.cell_m, problem.epsilon_obstacle,
+        problem.max_speed, problem.lane, problem.consistency_targets, SMOOTH_ACCEL_DELTA, problem.dt,
+        problem.rows, jacobians)
+    return residual, None if blocks is None else blocks.transpose(0, 2, 1, 3)  # (I, R, 4, 2), a view
 
 
 def check_fractions(n_interp: int) -> np.ndarray:

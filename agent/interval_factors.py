@@ -1,4 +1,4 @@
-"""The checks of every interval as GTSAM factors: chunks of intervals, one numpy evaluation.
+"""The checks of every interval as GTSAM factors: chunks of intervals, one evaluation.
 
 Two constructions of the same residuals (``PlannerConfig.interpolation``):
 
@@ -6,8 +6,8 @@ Two constructions of the same residuals (``PlannerConfig.interpolation``):
   ``PlannerConfig.intervals_per_factor`` consecutive intervals; each chunk is one
   CustomFactor on the support states it spans, (p_s, v_s) for s = first..last+1, whose
   residual is its intervals' rows (agent.factors) stacked. All chunks are evaluated
-  together in one vectorised call (a :class:`BatchedIntervals` cache shared by the chunk
-  factors); each factor returns its own slice.
+  together in one compiled call (agent.interval_kernel; a :class:`BatchedIntervals`
+  cache shared by the chunk factors); each factor returns its own slice.
 
   Why chunks: GTSAM calls a CustomFactor from C++ into Python once per linearisation and
   once per error evaluation, and each call, with the conversion of its Jacobian blocks to
@@ -52,7 +52,7 @@ def chunk_keys(first: int, end: int) -> list[int]:
 
 
 class BatchedIntervals:
-    """Evaluates every interval of a trajectory in one vectorised call, for many factors.
+    """Evaluates every interval of a trajectory in one call, for many factors.
 
     GTSAM linearises (or evaluates) factors one after another on the same Values; the
     first chunk factor to ask computes all intervals, the others read their slice.
