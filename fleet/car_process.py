@@ -49,7 +49,7 @@ import time
 from collections import Counter, deque
 from pathlib import Path
 
-from ..agent import messages
+from ..agent import interval_kernel, messages
 from ..agent.car_agent import CarAgent
 from ..agent.config import CarConfig, ConfigError, Scenario
 from ..agent.gp import standing
@@ -217,6 +217,7 @@ class CarProcess:
         log.info("car %d: NatNet %s at %s, link %s (version %d)", car.id, scenario.natnet.mode, scenario.natnet.server,
                  car.link, car.link_version)
         self.command.start()  # STOP to the car from its first tick, whatever else is not up yet
+        interval_kernel.warm()  # the planner's compiled loop loaded now, not in the first replan
         connector = threading.Thread(target=self._connect_natnet, name=f"natnet-connect-{car.id}", daemon=True)
         connector.start()
         bus = None
