@@ -83,7 +83,8 @@ class Plan:
         return self.t0 + self.dt * np.arange(self.n)
 
     def state_at(self, times: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
-        """Positions and velocities at absolute times (GP interpolation).
+        """Positions and velocities at absolute times (GP interpolation): the cubic Hermite
+        form of Lambda/Psi (identical to interpolation_matrices), see _state_rows.
 
         Before t0 the plan holds its first state; after its end it rests at its last
         position with zero velocity (a plan ends at its goal, standing still).
@@ -93,31 +94,11 @@ class Plan:
         if few is not None and all(map(math.isfinite, few)):
             rows = [self._state_rows(time) for time in few]
             return np.array([pos for pos, _ in rows]).reshape(-1, 2), np.array([vel for _, vel in rows]).reshape(-1, 2)
-        s = (t - self.t0) / self.dt
-        index = np.minimum(np.maximum(np.floor(s), 0.0), self.n - 2).astype(np.intp)
-        u = np.minimum(np.maximum(s - index, 0.0), 1.0)[:, None]  # np.clip is slower
-        # Cubic Hermite form of Lambda/Psi (identical to interpolation_matrices).
-        dt = self.dt
-        u2 = u * u
-        u3 = u2 * u
-        p0 = self.positions[index]
-        p1 = self.positions[index + 1]
-        v0 = self.velocities[index]
-        v1 = self.velocities[index + 1]
-        # h00 p0 + h10 dt v0 + h01 p1 + h11 dt v1, with h01 = 3u^2 - 2u^3 = 1 - h00
-        h01 = 3 * u2 - 2 * u3
-        pos = p0 + h01 * (p1 - p0) + (u3 - 2 * u2 + u) * dt * v0 + (u3 - u2) * dt * v1
-        # d/dt of the same: d01 = (6u - 6u^2)/dt = -d00
-        vel = (6 * (u - u2) / dt) * (p1 - p0) + (3 * u2 - 4 * u + 1) * v0 + (3 * u2 - 2 * u) * v1
-        before = s <= 0.0
-        after = s >= self.n - 1
-        if before.any():
-            pos[before] = self.positions[0]
-            vel[before] = self.velocities[0]
-        if after.any():
-            pos[after] = self.positions[-1]
-            vel[after] = 0.0
-        return pos, vel
+        from . import interpolate  # here: the command loop asks for few times, and never loads numba
+
+        flat = _not_nan(t).ravel()
+        pos, vel = interpolate.states(self.t0, self.dt, self.positions, self.velocities, flat)
+        return pos.reshape(t.shape + (2,)), vel.reshape(t.shape + (2,))
 
     def _state_rows(self, t: float) -> tuple[list[float], list[float]]:
         """state_at's numbers for one time, in plain floats: the same operations in the
@@ -146,17 +127,33 @@ class Plan:
         return self.state_at(times)[0]
 
     def acceleration_at(self, times: np.ndarray | float) -> np.ndarray:
-        """Acceleration of the posterior mean (piecewise linear in time)."""
+        """Acceleration of the posterior mean (piecewise linear in time), zero outside the
+        plan:
+
+            a(tau) = (12u - 6)(p0 - p1)/dt^2 + (6u - 4) v0/dt + (6u - 2) v1/dt
+        """
         t = np.atleast_1d(np.asarray(times, dtype=float))
+        few = t.tolist() if t.size <= FEW_TIMES and t.ndim == 1 else None
+        if few is not None and all(map(math.isfinite, few)):
+            return np.array([self._acceleration_row(time) for time in few]).reshape(-1, 2)
+        from . import interpolate  # see state_at
+
+        flat = _not_nan(t).ravel()
+        return interpolate.accelerations(self.t0, self.dt, self.positions, self.velocities, flat).reshape(t.shape + (2,))
+
+    def _acceleration_row(self, t: float) -> list[float]:
+        """acceleration_at's numbers for one time, in plain floats, the same operations in
+        the same order (the command loop's tracking asks for one time at every tick)."""
         s = (t - self.t0) / self.dt
-        index = np.minimum(np.maximum(np.floor(s), 0.0), self.n - 2).astype(np.intp)
-        u = np.minimum(np.maximum(s - index, 0.0), 1.0)[:, None]
+        i = int(min(max(math.floor(s), 0.0), self.n - 2))
+        u = min(max(s - i, 0.0), 1.0)
+        if s < 0.0 or s > self.n - 1:
+            return [0.0, 0.0]
         dt = self.dt
-        p0, p1 = self.positions[index], self.positions[index + 1]
-        v0, v1 = self.velocities[index], self.velocities[index + 1]
-        acc = ((12 * u - 6) * (p0 - p1) / dt**2 + (6 * u - 4) * v0 / dt + (6 * u - 2) * v1 / dt)
-        outside = (s < 0.0) | (s > self.n - 1)
-        return np.where(outside[:, None], 0.0, acc)
+        (p0x, p0y), (p1x, p1y) = self.positions[i:i + 2].tolist()
+        (v0x, v0y), (v1x, v1y) = self.velocities[i:i + 2].tolist()
+        return [(12 * u - 6) * (p0x - p1x) / dt**2 + (6 * u - 4) * v0x / dt + (6 * u - 2) * v1x / dt,
+                (12 * u - 6) * (p0y - p1y) / dt**2 + (6 * u - 4) * v0y / dt + (6 * u - 2) * v1y / dt]
 
     def resampled(self, t0: float, dt: float, n: int) -> "Plan":
         """The same trajectory on a new time grid (warm start of a replan)."""
@@ -166,6 +163,14 @@ class Plan:
 
     def shifted(self, offset: np.ndarray) -> "Plan":
         return Plan(self.t0, self.dt, self.positions + np.asarray(offset), self.velocities.copy())
+
+
+def _not_nan(t: np.ndarray) -> np.ndarray:
+    """Times to interpolate at; a NaN has no place on a plan (the compiled loop would read
+    outside it), infinities do (before the start, after the end)."""
+    if np.isnan(t).any():
+        raise ValueError("a plan asked for its state at a time that is not a number")
+    return t
 
 
 def standing(position: np.ndarray, t: float) -> Plan:

@@ -98,3 +98,49 @@ def test_one_time_gives_the_numbers_of_many_times():
                 assert np.array_equal(one[0][0], many[0][k]) and np.array_equal(one[1][0], many[1][k])
         few = plan.state_at(np.array(times[:FEW_TIMES]))
         assert np.array_equal(few[0], many[0][:FEW_TIMES]) and np.array_equal(few[1], many[1][:FEW_TIMES])
+
+
+def numpy_state_at(plan, t):
+    """The numpy form state_at had before agent.interpolate took its many times: the
+    reference the compiled loop must match to the last bit."""
+    s = (t - plan.t0) / plan.dt
+    index = np.minimum(np.maximum(np.floor(s), 0.0), plan.n - 2).astype(np.intp)
+    u = np.minimum(np.maximum(s - index, 0.0), 1.0)[:, None]
+    dt, u2 = plan.dt, u * u
+    u3 = u2 * u
+    p0, p1 = plan.positions[index], plan.positions[index + 1]
+    v0, v1 = plan.velocities[index], plan.velocities[index + 1]
+    pos = p0 + (3 * u2 - 2 * u3) * (p1 - p0) + (u3 - 2 * u2 + u) * dt * v0 + (u3 - u2) * dt * v1
+    vel = (6 * (u - u2) / dt) * (p1 - p0) + (3 * u2 - 4 * u + 1) * v0 + (3 * u2 - 2 * u) * v1
+    pos[s <= 0.0], vel[s <= 0.0] = plan.positions[0], plan.velocities[0]
+    pos[s >= plan.n - 1], vel[s >= plan.n - 1] = plan.positions[-1], 0.0
+    acc = ((12 * u - 6) * (p0 - p1) / dt**2 + (6 * u - 4) * v0 / dt + (6 * u - 2) * v1 / dt)
+    return pos, vel, np.where(((s < 0.0) | (s > plan.n - 1))[:, None], 0.0, acc)
+
+
+def test_many_times_give_the_numbers_of_the_numpy_form():
+    """Many times go to the compiled loop (agent.interpolate): the numbers of the numpy
+    form, bit for bit, before, inside and after the plan, infinities too; and one time at
+    a time (plain floats) the same again."""
+    rng = np.random.default_rng(8)
+    for _ in range(200):
+        n = int(rng.integers(2, 45))
+        plan = Plan(float(rng.normal() * 5), float(rng.uniform(0.05, 1.0)), rng.normal(size=(n, 2)),
+                    rng.normal(size=(n, 2)))
+        times = np.concatenate([rng.uniform(plan.t0 - 1.0, plan.t_end + 1.0, 40), plan.times(),
+                                [plan.t0, plan.t_end, -np.inf, np.inf]])
+        pos, vel, acc = numpy_state_at(plan, times)
+        got_pos, got_vel = plan.state_at(times)
+        assert np.array_equal(got_pos, pos) and np.array_equal(got_vel, vel)
+        assert np.array_equal(plan.acceleration_at(times), acc)
+        for k in rng.choice(len(times), 5):
+            assert np.array_equal(plan.acceleration_at(times[k]), acc[k:k + 1])
+
+
+def test_a_time_that_is_not_a_number_is_refused():
+    plan = Plan(0.0, 0.5, np.zeros((4, 2)), np.ones((4, 2)))
+    for times in (np.array([np.nan]), np.array([0.1, np.nan, 0.2, 0.3, 0.4])):
+        with pytest.raises(ValueError, match="not a number"):
+            plan.state_at(times)
+        with pytest.raises(ValueError, match="not a number"):
+            plan.acceleration_at(times)
