@@ -28,7 +28,7 @@ import numpy as np
 
 @numba.njit(cache=True, nogil=True)
 def _evaluate(p, v, intervals, weights, peer_positions, epsilons, sdf_values, origin_x, origin_y, cell,
-              eps_obs, max_speed, lane, targets, delta, dt, support, jacobians, residual, blocks):
+              eps_obs, max_speed, lane, targets, delta, delta2, dt, support, jacobians, residual, blocks):
     """p, v (I, K, 2): the GP-interpolated checks of the selected intervals (numpy's matmul,
     as before). Every product below is the numpy form's, in its order, active or not (a
     hinge off multiplies by 0.0): the same numbers, bit for bit, signed zeros too."""
@@ -122,7 +122,7 @@ def _evaluate(p, v, intervals, weights, peer_positions, epsilons, sdf_values, or
             # |a|_delta = sqrt(|a|^2 + delta^2) - delta.
             ax = (support[i + 1, 2] - support[i, 2]) / dt
             ay = (support[i + 1, 3] - support[i, 3]) / dt
-            root = math.sqrt(ax * ax + ay * ay + delta * delta)
+            root = math.sqrt(ax * ax + ay * ay + delta2)
             excess = root - delta - targets[i]
             last = residual.shape[1] - 1
             residual[out, last] = max(excess, 0.0)
@@ -160,7 +160,8 @@ def evaluate(positions: np.ndarray, velocities: np.ndarray, intervals: np.ndarra
     _evaluate(p, v, intervals, c(weights, dtype=float), c(peer_positions, dtype=float), c(epsilons, dtype=float),
               c(sdf_values, dtype=float), float(origin[0]), float(origin[1]), float(cell_m), float(epsilon_obstacle),
               float(max_speed), c(lane, dtype=float).reshape(-1, 2, 2),
-              np.empty(0) if targets is None else c(targets, dtype=float), float(delta), float(dt), support,
+              np.empty(0) if targets is None else c(targets, dtype=float), float(delta), float(delta)**2, float(dt),
+              support,
               jacobians, residual, blocks)
     return residual, blocks if jacobians else None
 

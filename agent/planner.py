@@ -34,7 +34,7 @@ import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import V, X
 
-from . import factors
+from . import factors, interpolate, interval_kernel
 from .config import PlannerConfig
 from .gp import Plan, interpolation_weights
 from .interval_factors import add_batched_checks, add_gtsam_interp_checks
@@ -325,3 +325,10 @@ def _check_request(request: PlanRequest) -> None:
     for peer in request.peers:
         if not (np.isfinite(peer.epsilon) and peer.epsilon > 0):
             raise PlanningError(f"peer epsilon must be positive, got {peer.epsilon}")
+
+
+def warm_compiled() -> None:
+    """Compile, or load from numba's cache, the planner's compiled loops (agent.interval_kernel,
+    agent.interpolate) -- once before many processes start, or before a car's first replan."""
+    interval_kernel.warm()
+    interpolate.warm()

@@ -49,11 +49,12 @@ import time
 from collections import Counter, deque
 from pathlib import Path
 
-from ..agent import interval_kernel, messages
+from ..agent import messages
 from ..agent.car_agent import CarAgent
 from ..agent.config import CarConfig, ConfigError, Scenario
 from ..agent.gp import standing
 from ..agent.operation import Mode, Operation
+from ..agent.planner import warm_compiled
 from ..agent.scenario_files import load_scenario
 from ..agent.world import build_sdf
 from ..bridge import natnet
@@ -217,7 +218,7 @@ class CarProcess:
         log.info("car %d: NatNet %s at %s, link %s (version %d)", car.id, scenario.natnet.mode, scenario.natnet.server,
                  car.link, car.link_version)
         self.command.start()  # STOP to the car from its first tick, whatever else is not up yet
-        interval_kernel.warm()  # the planner's compiled loop loaded now, not in the first replan
+        warm_compiled()  # the planner's compiled loops loaded now, not in the first replan
         connector = threading.Thread(target=self._connect_natnet, name=f"natnet-connect-{car.id}", daemon=True)
         connector.start()
         bus = None

@@ -38,7 +38,6 @@ from typing import Callable
 
 import numpy as np
 
-from ..agent import interval_kernel
 from ..agent.config import (
     ATTACKS,
     PAPER_LIAR,
@@ -49,6 +48,7 @@ from ..agent.config import (
     parse_attack,
     parse_id_values,
 )
+from ..agent.planner import warm_compiled
 from ..agent.scenario_files import dump_scenario, load_scenario
 from ..bridge import natnet
 from .bus import FleetBus
@@ -176,7 +176,7 @@ def run(scenario: Scenario, out: Path, seed: int = 0, timeout_s: float | None = 
     lifts its faults, so the observer's session closes with its peers in reach)."""
     stop = stop or threading.Event()
     out.mkdir(parents=True, exist_ok=True)
-    interval_kernel.warm()  # compiled and cached once here, not by every car process at once
+    warm_compiled()  # compiled and cached once here, not by every car process at once
     scenario = with_link_keys(scenario, out / "keys")
     config_path = out / "fleet.toml"
     config_path.write_text(dump_scenario(scenario))

@@ -16,7 +16,7 @@ import signal
 from collections.abc import Callable, Iterable, Iterator
 from typing import TypeVar
 
-from ..agent import interval_kernel
+from ..agent.planner import warm_compiled
 
 Task = TypeVar("Task")
 Result = TypeVar("Result")
@@ -29,7 +29,7 @@ def parallel(fn: Callable[[Task], Result], tasks: Iterable[Task], jobs: int,
         for task in tasks:
             yield task, fn(task)
         return
-    interval_kernel.warm()  # the planner's compiled loop, made once before the workers fork
+    warm_compiled()  # the planner's compiled loops, made once before the workers fork
     pool = multiprocessing.Pool(jobs, initializer=signal.signal, initargs=(signal.SIGINT, signal.SIG_IGN))
     try:
         calls = [(fn, index, task) for index, task in enumerate(tasks)]
