@@ -17,13 +17,19 @@ import numpy as np
 
 
 @numba.njit(cache=True, nogil=True)
+def _where(t0, dt, n, time):
+    """(s, i, u): time in support intervals from t0, the interval it falls in (clamped to
+    the plan) and how far into it, 0..1."""
+    s = (time - t0) / dt
+    index = min(max(np.floor(s), 0.0), n - 2)
+    return s, int(index), min(max(s - index, 0.0), 1.0)
+
+
+@numba.njit(cache=True, nogil=True)
 def _states(t0, dt, positions, velocities, times, pos, vel):
     n = positions.shape[0]
     for q in range(times.shape[0]):
-        s = (times[q] - t0) / dt
-        index = min(max(np.floor(s), 0.0), n - 2)
-        i = int(index)
-        u = min(max(s - index, 0.0), 1.0)
+        s, i, u = _where(t0, dt, n, times[q])
         # Cubic Hermite form of Lambda/Psi (agent.gp): h00 p0 + h10 dt v0 + h01 p1 + h11 dt v1
         # with h01 = 3u^2 - 2u^3 = 1 - h00, and its time derivative.
         u2 = u * u
@@ -51,10 +57,7 @@ def _states(t0, dt, positions, velocities, times, pos, vel):
 def _accelerations(t0, dt, dt2, positions, velocities, times, acc):
     n = positions.shape[0]
     for q in range(times.shape[0]):
-        s = (times[q] - t0) / dt
-        index = min(max(np.floor(s), 0.0), n - 2)
-        i = int(index)
-        u = min(max(s - index, 0.0), 1.0)
+        s, i, u = _where(t0, dt, n, times[q])
         outside = s < 0.0 or s > n - 1
         for axis in range(2):
             p0, p1 = positions[i, axis], positions[i + 1, axis]
