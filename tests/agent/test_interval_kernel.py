@@ -5,7 +5,7 @@ equal to the last bit."""
 import numpy as np
 import pytest
 
-from trustfg.agent import factors
+from trustfg.agent import factors, interval_kernel
 from trustfg.agent.config import Obstacle, WorldConfig
 from trustfg.agent.gp import interpolation_weights
 from trustfg.agent.world import build_sdf
@@ -100,3 +100,16 @@ def test_states_that_are_not_finite_are_refused(sdf, bad):
     positions[3, 1] = bad
     with pytest.raises(ValueError, match="not finite"):
         factors.evaluate_intervals(problem, positions, velocities)
+
+
+def test_one_compiled_signature_whatever_the_layout_of_the_states(sdf):
+    """GTSAM hands the states over in column order: without the wrapper's conversion every
+    process compiled the loop a second time (1.7 s) in its first plan, and a car process
+    let its command loop's permit lapse meanwhile."""
+    rng = np.random.default_rng(5)
+    problem, positions, velocities = problem_and_states(rng, sdf, 11, 2, True, 1)
+    for order in ("C", "F"):
+        factors.evaluate_intervals(problem, np.asarray(positions, order=order), np.asarray(velocities, order=order))
+        factors.evaluate_intervals(problem, np.asarray(positions, order=order), np.asarray(velocities, order=order),
+                                   intervals=np.arange(10)[::2], jacobians=False)
+    assert len(interval_kernel._evaluate.signatures) == 1
