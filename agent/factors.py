@@ -190,7 +190,7 @@ def evaluate_intervals(problem: IntervalProblem, positions: np.ndarray, velociti
     if intervals is None:
         intervals = np.arange(len(positions) - 1)
     residual, blocks = interval_kernel.evaluate(
-        positions, velocities, np.asarray(intervals, dtype=np.int64), problem.weights, problem.peer_positions,
+        positions, velocities, intervals, problem.weights, problem.peer_positions,
         problem.epsilons, problem.sdf.values, problem.sdf.origin, problem.sdf.cell_m, problem.epsilon_obstacle,
         problem.max_speed, problem.lane, problem.consistency_targets, SMOOTH_ACCEL_DELTA, problem.dt,
         problem.rows, jacobians)

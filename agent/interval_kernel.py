@@ -145,6 +145,7 @@ def evaluate(positions: np.ndarray, velocities: np.ndarray, intervals: np.ndarra
     that reached the distance grid would read outside it. A ValueError says so instead.
     """
     c = np.ascontiguousarray  # one compiled signature (C order), and no copy when already so
+    intervals = c(intervals, dtype=np.int64)
     support = np.concatenate([positions, velocities], axis=1)  # (N, 4): p, v per row
     if not np.isfinite(support).all():
         raise ValueError("interval checks asked at states that are not finite")
@@ -155,7 +156,7 @@ def evaluate(positions: np.ndarray, velocities: np.ndarray, intervals: np.ndarra
     pv = weights.reshape(2 * k, 4) @ states  # (I, 2K, 2)
     p, v = c(pv[:, 0::2]), c(pv[:, 1::2])
     count = len(intervals)
-    support, intervals = c(support), c(intervals, dtype=np.int64)  # GTSAM's arrays come in column order
+    support = c(support)  # GTSAM's arrays come in column order
     residual = np.empty((count, rows))
     blocks = np.empty((count, 4, rows, 2) if jacobians else (0, 4, rows, 2))
     _evaluate(p, v, intervals, c(weights, dtype=float), c(peer_positions, dtype=float), c(epsilons, dtype=float),
