@@ -42,6 +42,7 @@ import secrets
 import sys
 import time
 import tomllib
+from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -187,12 +188,14 @@ def _case(args: tuple[str, Scenario, str, int]) -> dict:
 
 
 def run_bank(scenes: dict[str, tuple[dict, str]], methods: list[str], seeds: dict[str, list[int]], jobs: int,
-             settings: dict, groups: dict[str, str], journal: Path) -> list[dict]:
+             settings: dict, groups: dict[str, str], journal: Path, run_missing: bool = True) -> list[dict]:
     """Every (scene, method, seed); ``groups`` says which row (bank or fresh) a scene joins.
 
     Each finished run is appended to ``journal`` (JSON lines) at once; a run already there
     for the same scene config, method and seed is not run again, so a long bank that was
-    stopped carries on where it stopped when started again with the same --out."""
+    stopped carries on where it stopped when started again with the same --out. With
+    ``run_missing`` off, nothing runs: the journal's runs of the selection, and a line
+    saying how many are missing, by method."""
     done = {}
     if journal.exists():
         for line in journal.read_text().splitlines():
@@ -208,7 +211,12 @@ def run_bank(scenes: dict[str, tuple[dict, str]], methods: list[str], seeds: dic
                     runs.append(done[(mark, method, seed)] | {"scene": scene, "group": groups[scene]})
                 else:
                     tasks.append((scene, scenario, method, seed))
-    if runs:
+    if not run_missing:
+        missing = Counter(method for _, _, method, _ in tasks)
+        print(f"{len(runs)} runs of the selection in {journal}; not in it, not run (--report-only): "
+              + (", ".join(f"{method} {n}" for method, n in missing.items()) or "none"), file=sys.stderr)
+        tasks = []
+    elif runs:
         print(f"{len(runs)} runs already in {journal}, {len(tasks)} to go", file=sys.stderr)
     tasks.sort(key=lambda task: -len(task[1].cars))  # the big scenes first: the pool ends together
     progress = Progress("bank", max(1, len(tasks)))
@@ -261,6 +269,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=None,
                         help="output folder (default runs/bank-<time>); an existing one carries on where it stopped")
     parser.add_argument("--no-figures", action="store_true", help="skip the PNG figure")
+    parser.add_argument("--report-only", action="store_true",
+                        help="run nothing: the table and figure of the runs of --out's journal that match the "
+                             "selection (how many are missing is said)")
     args = parser.parse_args(argv)
     if args.seeds < 1 or args.fresh < 0 or args.fresh_seeds < 1:
         parser.error("--seeds and --fresh-seeds must be at least 1, --fresh at least 0")
@@ -287,6 +298,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.fresh and fresh.is_dir() and any(fresh.glob("*.toml")):
         print(f"reusing the fresh scenes in {fresh}", file=sys.stderr)  # a stopped bank carries on
         paths = sorted(fresh.glob("*.toml"))
+    elif args.fresh and args.report_only:
+        parser.error(f"--report-only with --fresh: no fresh scenes in {fresh} to report on")
     elif args.fresh:
         from .scenes import generate, scene_file_text
         fresh_seeds = [secrets.randbelow(2**31) for _ in range(args.fresh)]
@@ -307,11 +320,15 @@ def main(argv: list[str] | None = None) -> int:
     started = time.perf_counter()
     out.mkdir(parents=True, exist_ok=True)
     try:
-        runs = run_bank(scenes, args.methods, seeds, args.jobs, settings, groups, out / "runs.jsonl")
+        runs = run_bank(scenes, args.methods, seeds, args.jobs, settings, groups, out / "runs.jsonl",
+                        run_missing=not args.report_only)
     except KeyboardInterrupt:
         print(f"\nstopped; every finished run is in {out / 'runs.jsonl'}: the same command carries on",
               file=sys.stderr)
         return 130
+    if not runs:
+        print(f"trustfg experiment bank: no run of this selection in {out / 'runs.jsonl'}", file=sys.stderr)
+        return 2
     from . import bank_report
     report = {
         "experiment": "bank",

@@ -113,6 +113,15 @@ def test_the_bank_command_writes_results_and_carries_on_after_a_stop(tmp_path):
     assert again.returncode == 0 and "4 runs already" in again.stderr
     assert (tmp_path / "runs.jsonl").read_text() == journal  # nothing ran twice
 
+    wider = [*args[:3], "--seeds", "2", *args[5:]]
+    report_only = _bank(*wider, "--report-only", "--no-figures")
+    assert report_only.returncode == 0, report_only.stderr
+    assert "4 runs of the selection" in report_only.stderr and "fixed 2, orca 2" in report_only.stderr
+    assert (tmp_path / "runs.jsonl").read_text() == journal  # nothing ran
+    assert len(json.loads((tmp_path / "bank.json").read_text())["runs"]) == 4
+    nothing = _bank(*wider[:-1], str(tmp_path / "empty"), "--report-only")
+    assert nothing.returncode == 2 and "no run of this selection" in nothing.stderr
+
 
 def test_bad_arguments_end_in_one_line(tmp_path):
     for args in (["--set", "planner.support_states=many"], ["--scenes", "no-such-scene"]):
