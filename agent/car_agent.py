@@ -321,7 +321,8 @@ class CarAgent:
         request = dataclasses.replace(request, warm_start=warm)
         try:
             outcome = plan_safely(request, self._bounds([peer for peer, _ in constraints]), self.scenario.planner,
-                                  self.scenario.verify, self.sdf, self.verified, self.clock)
+                                  self.scenario.verify, self.sdf, self.verified, self.clock,
+                                  self.scenario.control.lease_s / 2 if self.clock else None)
         except PlanningError as exc:
             self.counters["replan_failed"] += 1
             log.warning("car %d: replanning failed, keeping the previous plan: %s", self.car.id, exc)

@@ -3,7 +3,8 @@
 Every plan the optimiser returns is verified (agent.verify) before the car uses or
 publishes it. A plan that fails is not executed; the planner tries again from other
 starting guesses, cheapest first, until one verifies, ``VerifyConfig.max_attempts``
-plans have been tried, or (in the car process) ``budget_ms`` of CPU time has gone:
+plans have been tried, or (in the car process) ``budget_ms`` of CPU time or
+``wall_limit_s`` of wall time has gone:
 
     tighten     the failed plan as the warm start, with every epsilon it broke raised by
                 how far it broke it: a hinge that presses settles inside its epsilon
@@ -48,6 +49,13 @@ the caller's job (agent.car_agent).
 
 Pure: the budget's clock is passed in (None in the in-process fleet, which runs on simulated
 time and counts attempts only, so a run stays exactly repeatable from its seed).
+
+The budget is CPU time, so that a process waiting for a core is not cut short for the
+wait; the wall-time limit stops retries that would outlast what the car process can wait
+between two renewals of its command loop's permit (the car process passes half the
+lease). Eight car processes planning cold on two cores took up to 1.7 s of wall time for
+one replan of 80 ms of CPU and outlasted the 1 s lease (the command loop stopped the car
+until the next permit; circle-obstacles-8, seed 1).
 """
 
 from __future__ import annotations
@@ -109,9 +117,10 @@ class Outcome:
 
 def plan_safely(request: PlanRequest, bounds: Bounds, planner: PlannerConfig, config: VerifyConfig,
                 sdf: SignedDistanceField, last_verified: Plan | None,
-                clock: Callable[[], float] | None = None) -> Outcome:
+                clock: Callable[[], float] | None = None, wall_limit_s: float | None = None) -> Outcome:
     """Plan, verify, retry, else brake along ``last_verified``; raise PlanningError only
-    for a car state that is not finite."""
+    for a car state that is not finite. ``clock``: CPU time for ``config.budget_ms``;
+    ``wall_limit_s``: no new attempt after this much wall time (None: no limit)."""
     started = time.perf_counter()
     if not (np.all(np.isfinite(request.position)) and np.all(np.isfinite(request.velocity))
             and math.isfinite(request.t_now)):
@@ -145,7 +154,8 @@ def plan_safely(request: PlanRequest, bounds: Bounds, planner: PlannerConfig, co
             blocked.update(c.peer for c in verdict.conflicts if c.kind == "peer")
         else:
             verdict = None
-        if len(tried) >= config.max_attempts or (clock and (clock() - budget_start) * 1e3 > config.budget_ms):
+        if (len(tried) >= config.max_attempts or (clock and (clock() - budget_start) * 1e3 > config.budget_ms)
+                or (wall_limit_s is not None and time.perf_counter() - started > wall_limit_s)):
             break
         name, attempt = _next_attempt(request, tried, last, verdict, sdf, bounds)
     plan, verdict = fallback(last_verified, request, bounds, sdf, config)

@@ -96,6 +96,10 @@ def test_a_plan_through_the_middle_of_a_peer_is_retried_on_its_other_side(room):
     assert verify(outcome.plan, request.peers, bounds(1), room, CONFIG).ok
     once = plan_safely(request, bounds(1), PLANNER, dataclasses.replace(CONFIG, max_attempts=1), room, None)
     assert once.outcome == FALLBACK  # without the retries: no verified plan this replan
+    out_of_time = plan_safely(request, bounds(1), PLANNER, CONFIG, room, None, wall_limit_s=0.0)
+    assert out_of_time.outcome == FALLBACK and out_of_time.tried == ("warm",)  # no retry past the wall limit
+    in_time = plan_safely(request, bounds(1), PLANNER, CONFIG, room, None, wall_limit_s=60.0)
+    assert in_time.tried == outcome.tried and np.array_equal(in_time.plan.positions, outcome.plan.positions)
 
 
 def test_a_clear_plan_verifies_first_try(room):
