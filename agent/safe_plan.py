@@ -54,8 +54,9 @@ The budget is CPU time, so that a process waiting for a core is not cut short fo
 wait; the wall-time limit stops retries that would outlast what the car process can wait
 between two renewals of its command loop's permit (the car process passes half the
 lease). Eight car processes planning cold on two cores took up to 1.7 s of wall time for
-one replan of 80 ms of CPU and outlasted the 1 s lease (the command loop stopped the car
-until the next permit; circle-obstacles-8, seed 1).
+one replan, within its CPU budget, and outlasted the 1 s lease (the command loop stopped
+the car until the next permit; circle-obstacles-8, seed 1); with the limit, the longest
+took 860 ms in the same 15 runs.
 """
 
 from __future__ import annotations
