@@ -334,7 +334,7 @@ def main(argv: list[str] | None = None) -> int:
         "experiment": "bank",
         "command": "trustfg experiment bank " + " ".join(argv if argv is not None else sys.argv[1:]),
         "machine": machine(),
-        "wall_time_s": round(time.perf_counter() - started, 1),
+        "wall_time_s": None if args.report_only else round(time.perf_counter() - started, 1),
         "cpu_time_s": round(sum(r.get("cpu_s", 0.0) for r in runs), 1),
         "methods": {m: {"label": METHODS[m].label, "description": METHODS[m].description} for m in args.methods},
         "scenes": {name: {"group": groups[name], "about": note, "seeds": seeds[name]}

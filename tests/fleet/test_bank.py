@@ -119,6 +119,7 @@ def test_the_bank_command_writes_results_and_carries_on_after_a_stop(tmp_path):
     assert "4 runs of the selection" in report_only.stderr and "fixed 2, orca 2" in report_only.stderr
     assert (tmp_path / "runs.jsonl").read_text() == journal  # nothing ran
     assert len(json.loads((tmp_path / "bank.json").read_text())["runs"]) == 4
+    assert "the journal's runs, none run now" in (tmp_path / "bank.md").read_text()
     nothing = _bank(*wider[:-1], str(tmp_path / "empty"), "--report-only")
     assert nothing.returncode == 2 and "no run of this selection" in nothing.stderr
 
