@@ -218,18 +218,19 @@ def run_bank(scenes: dict[str, tuple[dict, str]], methods: list[str], seeds: dic
         tasks = []
     elif runs:
         print(f"{len(runs)} runs already in {journal}, {len(tasks)} to go", file=sys.stderr)
-    tasks.sort(key=lambda task: -len(task[1].cars))  # the big scenes first: the pool ends together
-    progress = Progress("bank", max(1, len(tasks)))
-    with journal.open("a") as log:
-        for task, run in parallel(_case, tasks, jobs, ordered=False):
-            run["group"] = groups[run["scene"]]
-            run["fingerprint"] = fingerprint(task[1])
-            log.write(json.dumps(run) + "\n")
-            log.flush()
-            runs.append(run)
-            progress.step(f"{run['scene']} {run['method']} seed {run['seed']}: {run['outcome']}, "
-                          f"least clearance {run['least_clearance_m']:.3f} m, {run['wall_s']:.1f} s")
-    progress.done()
+    if tasks:  # nothing to run (a whole journal, or --report-only): no pool, and the journal untouched
+        tasks.sort(key=lambda task: -len(task[1].cars))  # the big scenes first: the pool ends together
+        progress = Progress("bank", len(tasks))
+        with journal.open("a") as log:
+            for task, run in parallel(_case, tasks, jobs, ordered=False):
+                run["group"] = groups[run["scene"]]
+                run["fingerprint"] = fingerprint(task[1])
+                log.write(json.dumps(run) + "\n")
+                log.flush()
+                runs.append(run)
+                progress.step(f"{run['scene']} {run['method']} seed {run['seed']}: {run['outcome']}, "
+                              f"least clearance {run['least_clearance_m']:.3f} m, {run['wall_s']:.1f} s")
+        progress.done()
     runs.sort(key=lambda r: (r["group"] != "bank", list(scenes).index(r["scene"]), list(METHODS).index(r["method"]),
                              r["seed"]))
     return runs
@@ -318,7 +319,8 @@ def main(argv: list[str] | None = None) -> int:
         groups[data["name"]] = "fresh"
         seeds[data["name"]] = list(range(args.seed, args.seed + args.fresh_seeds))
     started = time.perf_counter()
-    out.mkdir(parents=True, exist_ok=True)
+    if not args.report_only:  # a report of a folder that holds no journal leaves nothing behind
+        out.mkdir(parents=True, exist_ok=True)
     try:
         runs = run_bank(scenes, args.methods, seeds, args.jobs, settings, groups, out / "runs.jsonl",
                         run_missing=not args.report_only)

@@ -122,6 +122,7 @@ def test_the_bank_command_writes_results_and_carries_on_after_a_stop(tmp_path):
     assert "the journal's runs, none run now" in (tmp_path / "bank.md").read_text()
     nothing = _bank(*wider[:-1], str(tmp_path / "empty"), "--report-only")
     assert nothing.returncode == 2 and "no run of this selection" in nothing.stderr
+    assert not (tmp_path / "empty").exists()  # nothing made where nothing was
 
 
 def test_bad_arguments_end_in_one_line(tmp_path):
