@@ -93,20 +93,27 @@ def zenoh_config(bus: BusConfig, extra_listen: tuple[str, ...] = ()) -> zenoh.Co
     """A zenoh.Config from our BusConfig, on top of the file ``bus.zenoh_config`` if given.
 
     The file is the base and ``[bus]`` completes it, never silently overrides it: endpoints
-    are added to the file's lists; ``mode``, multicast scouting and its interface come from
-    the file when it sets them, and a ``[bus]`` value that differs both from the file's and
-    from its own default is an error naming both (BusError)."""
+    are added to the file's lists; ``mode``, multicast scouting and its interface and
+    ``max_links`` come from the file when it sets them, and a ``[bus]`` value that differs
+    both from the file's and from its own default is an error naming both (BusError).
+    Zenoh's config answers its own default for a setting a file leaves out, so a file
+    value equal to Zenoh's default counts as not set: a lab's file that did not mention
+    ``max_links`` left every car one link per peer (Zenoh's 1), no UDP link beside the
+    TCP one, and plans queued behind TCP's retransmissions. To ask for Zenoh's default
+    value, set it in ``[bus]``."""
     try:
         try:
             config = zenoh.Config.from_file(str(Path(bus.zenoh_config))) if bus.zenoh_config else zenoh.Config()
         except Exception as exc:
             raise BusError(f"bad Zenoh configuration in bus.zenoh_config {bus.zenoh_config}: {_said(exc)}") from exc
-        default = BusConfig()
+        default, zenoh_default = BusConfig(), zenoh.Config()
         for path, field_name in (("mode", "mode"), ("scouting/multicast/enabled", "multicast_scouting"),
                                  ("scouting/multicast/interface", "multicast_interface"),
                                  ("transport/unicast/max_links", "max_links")):
             ours = getattr(bus, field_name)
             theirs = _get(config, path) if bus.zenoh_config else None
+            if theirs is not None and theirs == _get(zenoh_default, path):
+                theirs = None  # not set by the file, or set to what it would be anyway
             if theirs is None:
                 if field_name != "multicast_interface" or ours:
                     config.insert_json5(path, json.dumps(ours))

@@ -110,7 +110,8 @@ def _delay(setup: Setup) -> None:
     zenoh_file = Path(tempfile.mkdtemp(prefix="trustfg-delay-")) / "no-gossip.json5"
     zenoh_file.write_text('{ scouting: { gossip: { enabled: false } } }\n')
     setup.fleet = dataclasses.replace(setup.fleet, bus=dataclasses.replace(
-        setup.fleet.bus, connect=tuple(relays), zenoh_config=str(zenoh_file)))
+        setup.fleet.bus, connect=tuple(relays), zenoh_config=str(zenoh_file),
+        max_links=1))  # one TCP link per pair, the relayed one
 
 
 def _skewed_clock(setup: Setup) -> None:

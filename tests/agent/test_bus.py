@@ -139,6 +139,22 @@ def test_a_zenoh_config_file_is_completed_by_bus_values_and_a_contradiction_is_a
     assert json.loads(without_file.get_json("mode")) == "client"
 
 
+def test_a_setting_the_file_leaves_out_is_ours_not_zenohs_default(tmp_path):
+    """Zenoh answers its own default (max_links 1) for a setting a file does not name: the
+    file must not be taken to have set it, or a lab's file quietly leaves each car one
+    link per peer and no UDP link for the plans. What the file does set, it sets."""
+    base = tmp_path / "base.json5"
+    base.write_text('{ mode: "peer", scouting: { multicast: { enabled: false } } }')
+    config = zenoh_config(BusConfig(zenoh_config=str(base)))
+    assert json.loads(config.get_json("transport/unicast/max_links")) == BusConfig().max_links
+    assert json.loads(zenoh_config(BusConfig(zenoh_config=str(base), max_links=1))
+                      .get_json("transport/unicast/max_links")) == 1
+    base.write_text('{ transport: { unicast: { max_links: 2 } } }')
+    assert json.loads(zenoh_config(BusConfig(zenoh_config=str(base))).get_json("transport/unicast/max_links")) == 2
+    with pytest.raises(BusError, match="bus.max_links = 3 contradicts"):
+        zenoh_config(BusConfig(zenoh_config=str(base), max_links=3))
+
+
 def test_a_car_answers_the_operators_clock_query():
     a = endpoint()
     with FleetBus(BusConfig(listen=(a,)), FLEET, 4, clock=lambda: time.time() + 5.0) as car, \
