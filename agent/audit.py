@@ -152,9 +152,8 @@ class Ledger:
         the peer's were lost between the last one and this, the first of them stamped no
         earlier than that -- the last plan is held only until it could have given notice."""
         c = self.config
-        if lost_after is not None and self.claims:
-            last = self.claims[-1]
-            last.lost_successor = min(last.lost_successor, max(lost_after, last.stamp))
+        if lost_after is not None:
+            self.lost(lost_after)
         times = check_times(plan, stamp, c)
         claim = Claim(plan, stamp, received, times, plan.position_at(times))
         self.claims.append(claim)
@@ -162,6 +161,13 @@ class Ledger:
             self.claims.popleft()
             self.dropped += 1
         return claim
+
+    def lost(self, earliest: float) -> None:
+        """Plans of the peer's stamped from ``earliest`` on were lost or came too late to
+        use: the last plan kept is held only until one of them could have given notice."""
+        if self.claims:
+            last = self.claims[-1]
+            last.lost_successor = min(last.lost_successor, max(earliest, last.stamp))
 
     def due(self, track: Track | None) -> list[Check]:
         """Every check whose time our observations of the peer have reached, in order;

@@ -32,10 +32,11 @@ How peers' plans are used (agent.evidence; docs/architecture.md, "Trust"):
   window in which the proximity guard (agent.guard), fed the poses we see, would have
   held the peer below its plan's speed is no evidence either way: every honest car's
   guard slows it unannounced when another car or a wall comes close ahead. A failure in
-  a window in which a plan of the peer's was lost (a gap in its sequence numbers) that
-  could have told the change is not recorded either (counted): an honest car's notice
-  lost in the network is not its fault; successes still count, so loss does not leave a
-  peer at the prior. A liar that skips sequence numbers on purpose escapes consistency
+  a window in which a plan of the peer's that could have told the change was lost (a
+  gap in its sequence numbers), came too late to use, or has not come yet (nothing
+  heard stamped that late: a stalled link) is not recorded either (counted): an honest
+  car's notice held up in the network is not its fault; successes still count, so loss
+  does not leave a peer at the prior. A liar that skips sequence numbers on purpose escapes consistency
   failures that way -- it still meets the check at the stamp and the audit (held a
   period plus the notice), and the margin and the guard bound the rest (README,
   false-yield).
@@ -436,9 +437,14 @@ class CarAgent:
 
 
 def _notice_lost(view: PeerView, t_old: float, t: float) -> bool:
-    """Could a plan of the peer's that we lost have told a change of mind in the window
-    from ``t_old`` to ``t`` (stamped after it began, ANNOUNCED_MIN_S before it ended)?"""
-    return any(earliest <= t - ANNOUNCED_MIN_S and latest > t_old for earliest, latest in view.lost)
+    """Could a plan of the peer's that we lost, that came too late to use, or that has
+    not reached us yet have told a change of mind in the window from ``t_old`` to ``t``
+    (stamped after it began, ANNOUNCED_MIN_S before it ended)? Not reached us yet: we
+    heard nothing stamped that late -- the peer's plans are held up in the network (a
+    TCP link under loss stalls for seconds) or it went silent."""
+    told_by = t - ANNOUNCED_MIN_S
+    return view.heard_until < told_by or any(earliest <= told_by and latest > t_old
+                                              for earliest, latest in view.lost)
 
 
 def _acceleration_mismatch(view: PeerView, fresh_s: float, until: float) -> tuple[float, float, float] | None:

@@ -74,7 +74,11 @@ class PeerView:
     consistency either way."""
     lost: deque = field(default_factory=lambda: deque(maxlen=32))
     """(earliest, latest) stamp (our clock) a plan of the peer's that we lost could have
-    had, from gaps in its sequence numbers: a change of mind may have been told there."""
+    had, from gaps in its sequence numbers, or that came too late to use: a change of
+    mind may have been told there."""
+    heard_until: float = -np.inf
+    """The newest stamp (our clock) of any plan message heard from the peer, used or not:
+    what it said up to then has reached us or is known lost."""
     history: deque = field(default_factory=lambda: deque(maxlen=32))
     """(stamp, plan) of the plans accepted lately, in order of arrival (our clock)."""
     clock: ClockEstimate = field(init=False)
@@ -111,14 +115,20 @@ def take_plan(view: PeerView, message: PlanMessage, now: float, track: Track | N
         record(TRANSPARENCY, 0.0, 1.0)
         return
     stamp = view.clock.to_ours(message.stamp)
+    view.heard_until = max(view.heard_until, stamp)
     plan = retimed(message.plan, stamp - message.stamp) if stamp != message.stamp else message.plan
-    if now - stamp > config.stale_after_s:
-        counters["plans_too_late"] += 1  # delayed in the network: no use, no evidence
-        return
     lost_after = view.clock.to_ours(previous.stamp) + view.replan_period_s if lost else None
     if lost_after is not None:
         counters["peer_plans_lost"] += 1
         view.lost.append((lost_after, stamp))
+    if now - stamp > config.stale_after_s:
+        # Delayed in the network: no use, no evidence -- and, like a lost plan, it may
+        # have told a change of mind that the peer's older plans are no longer held to.
+        counters["plans_too_late"] += 1
+        if lost_after is None:
+            view.lost.append((stamp, stamp))
+        view.ledger.lost(stamp if lost_after is None else lost_after)
+        return
     view.ledger.add(plan, stamp, now, lost_after=lost_after)
     if config.reject_plans:
         view.unverified, view.unverified_received = plan, now
