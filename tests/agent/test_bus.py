@@ -5,10 +5,12 @@ import json
 import math
 import socket
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
 
+import trustfg
 from tests.conftest import wait_for
 from trustfg.agent import messages
 from trustfg.agent.config import BusConfig
@@ -153,6 +155,19 @@ def test_a_setting_the_file_leaves_out_is_ours_not_zenohs_default(tmp_path):
     assert json.loads(zenoh_config(BusConfig(zenoh_config=str(base))).get_json("transport/unicast/max_links")) == 2
     with pytest.raises(BusError, match="bus.max_links = 3 contradicts"):
         zenoh_config(BusConfig(zenoh_config=str(base), max_links=3))
+
+
+def test_the_labs_zenoh_file_leaves_room_for_the_udp_link():
+    """deploy/zenoh/peer-endpoints.json5 does not name max_links, and Zenoh answers its
+    own default (one link per peer) for it: taken as the file's word, that left the peers
+    their TCP link only and no UDP one for the best-effort plans."""
+    base = str(Path(trustfg.__file__).parent / "deploy" / "zenoh" / "peer-endpoints.json5")
+    a, a_udp = endpoint(), udp_endpoint()
+    with FleetBus(BusConfig(listen=(a, a_udp), zenoh_config=base), FLEET, 1), \
+            FleetBus(BusConfig(listen=(endpoint(), udp_endpoint()), connect=(a, a_udp), zenoh_config=base),
+                     FLEET, 2) as two:
+        assert wait_for(lambda: {reliable for *_, reliable in two.links()} == {True, False}, 5.0), two.links()
+        assert any(src.startswith("udp/") and not reliable for src, _, reliable in two.links())
 
 
 def test_a_car_answers_the_operators_clock_query():
