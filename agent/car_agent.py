@@ -36,10 +36,10 @@ How peers' plans are used (agent.evidence; docs/architecture.md, "Trust"):
   gap in its sequence numbers), came too late to use, or has not come yet (nothing
   heard stamped that late: a stalled link) is not recorded either (counted): an honest
   car's notice held up in the network is not its fault; successes still count, so loss
-  does not leave a peer at the prior. A liar that skips sequence numbers on purpose escapes consistency
-  failures that way -- it still meets the check at the stamp and the audit (held a
-  period plus the notice), and the margin and the guard bound the rest (README,
-  false-yield).
+  does not leave a peer at the prior. A liar that skips sequence numbers on purpose (or
+  holds its plans back) escapes consistency failures that way -- it still meets the
+  check at the stamp and the audit (held a period plus the notice), and the margin and
+  the guard bound the rest (README, false-yield).
 
 A liar (``car.attack``, agent.attacks) plans and drives like everyone else and lies in
 what it publishes.
