@@ -108,6 +108,9 @@ class CarProcess:
         self._bodies = {c.body_id: c.id for c in scenario.cars}
         self._seq: Counter = Counter()
         self._alive: dict[int, bool] = {}
+        """Peers' liveliness tokens as last seen (a token going down: the peer left)."""
+        self._on_bus: dict[int, bool] = {}
+        """Peers on the bus by token or, a token lost by Zenoh, by hearing (FleetBus.on_bus)."""
         self.laps = Laps(car, scenario.control.laps, scenario.control.lap_turn_s)
 
     def _new_agent(self) -> CarAgent:
@@ -281,7 +284,7 @@ class CarProcess:
             body=None if self._natnet is None or self._own_pose() is not None else self.car.body_id,
             link=None if now - self.command_report.answered_at <= 3 * self.scenario.control.link_ping_period_s + 1.0
             else self.car.link,
-            absent_peers=[c.id for c in self.scenario.cars if c.id != self.car.id and not self._alive.get(c.id)],
+            absent_peers=[c.id for c in self.scenario.cars if c.id != self.car.id and not self._on_bus.get(c.id)],
             mode=self.operation.mode, hears_operator=self.operation.hears_operator(now))
 
     def _main_loop(self, bus: FleetBus) -> None:
@@ -333,6 +336,7 @@ class CarProcess:
                 self._publish_status(bus)
             if now >= next_say:
                 next_say = now + 1.0
+                self._on_bus = bus.on_bus()
                 self._waiting.say(self.state, self.waiting_for(now), now)
             bus.wait(0.005)  # wakes at once when a message arrives
 

@@ -205,6 +205,54 @@ def test_silent_kinds_are_those_a_live_car_is_not_heard_on():
     assert silent_kinds(heard, alive, kinds, now, opened=now - SILENT_S - 0.1) == {"plan": [1]}
 
 
+def test_a_car_whose_token_never_came_is_on_the_bus_while_it_is_heard():
+    from trustfg.fleet.bus import SILENT_S, present
+    now = 100.0
+    tokens = {1: True, 2: False}
+    heard = {(1, "plan"): now - 0.1, (2, "plan"): now - 0.1,  # 2 left: late samples do not bring it back
+             (3, "pose"): now - SILENT_S - 1.0, (3, "plan"): now - 0.2,  # no token, heard lately
+             (4, "status"): now - SILENT_S - 0.1,  # no token, silent since
+             (0, "start"): now - 0.1}  # the operator: no car
+    assert present(tokens, heard, now) == {1: True, 2: False, 3: True, 4: False}
+    assert present(tokens, heard, now + SILENT_S) == {1: True, 2: False, 3: False, 4: False}
+    assert present(tokens, {}, now) == tokens
+
+
+def test_a_car_heard_without_a_token_is_on_the_bus_and_watched(monkeypatch):
+    """Zenoh 1.10 sometimes never delivers a peer's liveliness token between two cars that
+    both listen on TCP and UDP, though the peer's samples arrive (README). A real session
+    publishing as car 9 without declaring a token stands in for such a peer: car 1 counts
+    it on the bus while it hears it, and watches its subscriptions as for any live car."""
+    import zenoh
+
+    import trustfg.fleet.bus as bus_module
+    monkeypatch.setattr(bus_module, "SILENT_S", 1.0)
+    monkeypatch.setattr(bus_module, "RESUBSCRIBE_EVERY_S", 1.0)
+    a = endpoint()
+    with FleetBus(BusConfig(listen=(a,)), FLEET, 1) as one:
+        config = zenoh.Config()
+        config.insert_json5("mode", json.dumps("peer"))
+        config.insert_json5("connect/endpoints", json.dumps([a]))
+        config.insert_json5("scouting/multicast/enabled", "false")
+        session = zenoh.open(config)
+        try:
+            deadline = time.monotonic() + 5.0
+            while time.monotonic() < deadline and 9 not in one.on_bus():
+                session.put(f"trustfg/{FLEET}/9/pose", pose(9, 1))
+                one.drain()
+                time.sleep(0.05)
+            assert one.on_bus().get(9) is True and 9 not in one.alive  # heard, no token
+            for _ in range(30):  # 1.5 s of poses and nothing else: its other kinds are watched
+                session.put(f"trustfg/{FLEET}/9/pose", pose(9, 1))
+                one.drain()
+                time.sleep(0.05)
+            assert one.counters["peers_without_token"] == 1
+            assert one.counters["resubscribed_plan"] >= 1 and one.counters["resubscribed_status"] >= 1
+        finally:
+            session.close()
+        assert wait_for(lambda: one.on_bus().get(9) is False, 3.0)  # silent: off the bus
+
+
 def status_of(car: int) -> bytes:
     return messages.encode(messages.StatusMessage(car, 1, time.time(), "driving", 1.0, 1, False, {}, 1))
 
