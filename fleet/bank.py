@@ -39,6 +39,7 @@ import json
 import os
 import platform
 import secrets
+import subprocess
 import sys
 import time
 import tomllib
@@ -191,7 +192,8 @@ def run_bank(scenes: dict[str, tuple[dict, str]], methods: list[str], seeds: dic
              settings: dict, groups: dict[str, str], journal: Path, run_missing: bool = True) -> list[dict]:
     """Every (scene, method, seed); ``groups`` says which row (bank or fresh) a scene joins.
 
-    Each finished run is appended to ``journal`` (JSON lines) at once; a run already there
+    Each finished run is appended to ``journal`` (JSON lines) at once, with the commit it
+    ran on (:func:`code_version`); a run already there
     for the same scene config, method and seed is not run again, so a long bank that was
     stopped carries on where it stopped when started again with the same --out. With
     ``run_missing`` off, nothing runs: the journal's runs of the selection, and a line
@@ -221,10 +223,12 @@ def run_bank(scenes: dict[str, tuple[dict, str]], methods: list[str], seeds: dic
     if tasks:  # nothing to run (a whole journal, or --report-only): no pool, and the journal untouched
         tasks.sort(key=lambda task: -len(task[1].cars))  # the big scenes first: the pool ends together
         progress = Progress("bank", len(tasks))
+        code = code_version()
         with journal.open("a") as log:
             for task, run in parallel(_case, tasks, jobs, ordered=False):
                 run["group"] = groups[run["scene"]]
                 run["fingerprint"] = fingerprint(task[1])
+                run["code"] = code
                 log.write(json.dumps(run) + "\n")
                 log.flush()
                 runs.append(run)
@@ -239,6 +243,25 @@ def run_bank(scenes: dict[str, tuple[dict, str]], methods: list[str], seeds: dic
 def fingerprint(scenario: Scenario) -> str:
     """A digest of everything a run depends on besides its method and seed."""
     return hashlib.sha256(repr(scenario).encode()).hexdigest()[:16]
+
+
+def code_version() -> str:
+    """The commit this package runs from (``git describe --always --dirty``: ``-dirty``
+    when the tree has changes), else the installed version: what a journal entry was
+    run on, so runs of several sittings and commits can be told apart."""
+    here = Path(__file__).resolve().parent
+    try:
+        done = subprocess.run(["git", "-C", str(here), "describe", "--always", "--dirty", "--abbrev=7"],
+                              capture_output=True, text=True, timeout=5.0)
+        if done.returncode == 0 and done.stdout.strip():
+            return done.stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        pass
+    from importlib.metadata import PackageNotFoundError, version
+    try:
+        return "trustfg " + version("trustfg")
+    except PackageNotFoundError:
+        return "unknown"
 
 
 def machine() -> dict:
@@ -338,6 +361,7 @@ def main(argv: list[str] | None = None) -> int:
         "machine": machine(),
         "wall_time_s": None if args.report_only else round(time.perf_counter() - started, 1),
         "cpu_time_s": round(sum(r.get("cpu_s", 0.0) for r in runs), 1),
+        "code": dict(Counter(r.get("code", "not recorded") for r in runs)),
         "methods": {m: {"label": METHODS[m].label, "description": METHODS[m].description} for m in args.methods},
         "scenes": {name: {"group": groups[name], "about": note, "seeds": seeds[name]}
                    for name, (_, note) in scenes.items()},

@@ -96,6 +96,9 @@ def test_the_bank_command_writes_results_and_carries_on_after_a_stop(tmp_path):
     assert done.returncode == 0, done.stderr
     report = json.loads((tmp_path / "bank.json").read_text())
     assert len(report["runs"]) == 4 and (tmp_path / "bank.png").stat().st_size > 0
+    code = report["runs"][0]["code"]  # the commit (or version) each run was made on
+    assert code not in ("", "unknown") and report["code"] == {code: 4}
+    assert f"run on {code} (4)" in (tmp_path / "bank.md").read_text()
     assert "| corridor-4 | ORCA | 1 |" in (tmp_path / "bank.md").read_text()
     for run in report["runs"]:
         assert run["scene"] in ("corridor-4", "bottleneck-4") and run["seed"] == 300
