@@ -70,6 +70,34 @@ def trustfg_processes() -> list[str]:
     return found
 
 
+def _parent(pid: str) -> str | None:
+    try:
+        for line in (Path("/proc") / pid / "status").read_text().splitlines():
+            if line.startswith("PPid:"):
+                return line.split()[1]
+    except OSError:
+        pass
+    return None
+
+
+RUNNING_AT_START = {line.split(":")[0] for line in trustfg_processes()}
+"""trustfg processes that ran before the suite (a developer's own bank or fleet)."""
+
+
+def left_behind() -> list[str]:
+    """trustfg processes the suite started and did not stop: those not running when it
+    began, nor started by one that was (a pool's new worker)."""
+    out = []
+    for line in trustfg_processes():
+        pid, chain = line.split(":")[0], set()
+        while pid not in (None, "0", "1") and pid not in chain and pid not in RUNNING_AT_START:
+            chain.add(pid)
+            pid = _parent(pid)
+        if pid not in RUNNING_AT_START:
+            out.append(line)
+    return out
+
+
 def _bound_sockets(protos=("tcp", "tcp6", "udp", "udp6")) -> dict[str, tuple[str, int]]:
     """Socket inode -> (protocol, port) of every listening TCP and bound UDP socket on
     this machine (from /proc/net)."""

@@ -1,10 +1,18 @@
 """After the whole suite: no trustfg process and no port the tests opened is left."""
 
-from tests.conftest import BOUND_AT_START, FIRST_HELD_AFTER, bound_ports, port_owners, trustfg_processes, wait_for
+from tests.conftest import (
+    BOUND_AT_START,
+    FIRST_HELD_AFTER,
+    bound_ports,
+    left_behind,
+    port_owners,
+    trustfg_processes,
+    wait_for,
+)
 
 
 def test_nothing_is_left_behind():
-    assert wait_for(lambda: not trustfg_processes(), 10.0), trustfg_processes()
+    assert wait_for(lambda: not left_behind(), 10.0), left_behind()
     left = lambda: bound_ports() - BOUND_AT_START  # noqa: E731
     assert wait_for(lambda: not left(), 10.0), {port: (owners, "first held by pytest after " + FIRST_HELD_AFTER.get(port, "-"))
                                                 for port, owners in port_owners(left()).items()}
@@ -33,6 +41,7 @@ def test_the_check_sees_a_leftover_process_and_port():
     sock.listen()
     try:
         assert wait_for(lambda: any(line.startswith(f"{probe.pid}:") for line in trustfg_processes()), 5.0)
+        assert any(line.startswith(f"{probe.pid}:") for line in left_behind())  # the suite's own
         assert ("tcp", sock.getsockname()[1]) in bound_ports() - BOUND_AT_START
     finally:
         probe.kill()
