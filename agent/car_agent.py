@@ -51,12 +51,22 @@ keep each car near its previous plan (a car does not flip sides between replans)
 (3) a planned arrival time that never lies further ahead than the remaining path at
 cruise speed, so a car always intends to move on and waits only while someone is in
 its way (no car plans to wait for another that waits for it).
+
+Kept plans (``verify.keep_s`` > 0; off by default): a replan may keep the current plan
+instead of optimising anew -- for at most ``keep_s`` after it was optimised, only while
+the car tracks it (a new plan would start from it), it still goes to the goal, no
+deadlock rule sends the car elsewhere, and it verifies from now
+(agent.verify, ``t_from``) against the peers' newest plans with their present epsilons,
+the walls and the limits -- the same check a new plan must pass. Otherwise the replan
+optimises as always. It trades plans improved at every period for CPU.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import logging
+import math
+import time
 from collections import Counter, deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -71,10 +81,10 @@ from .gp import Plan, standing
 from .guard import speed_cap
 from .messages import PlanMessage, TrustReport
 from .planner import PeerConstraint, PlanningError, PlanRequest, PlanResult
-from .safe_plan import FALLBACK, Outcome, plan_safely
+from .safe_plan import FALLBACK, FIRST, KEPT, RETRY, Outcome, plan_safely
 from .track import Track
 from .trust import CONSISTENCY, SAFETY, TrustBook, graded
-from .verify import Bounds
+from .verify import Bounds, verify
 from .world import SignedDistanceField
 
 log = logging.getLogger(__name__)
@@ -124,6 +134,9 @@ class CarAgent:
         self.verified: Plan | None = None
         """The last plan that passed verification: a fallback brakes along it."""
         self.last_outcome: Outcome | None = None
+        self._optimised_at: float | None = None
+        """When the current plan was optimised and verified (None: it was not, or the car
+        has given way since): a plan is kept at most ``verify.keep_s`` after that."""
         self.deadlock = DeadlockWatch(self.car.id, self.scenario.deadlock)
         self.replan_ms: deque = deque(maxlen=100_000)  # bounded: a lab run may last hours
         self.counters: Counter = Counter()
@@ -315,6 +328,10 @@ class CarAgent:
         if self.liar is not None and now >= self.depart_at:  # a framer drives where it means harm
             request, constraints = self.liar.steer(request, constraints, now, self._seen(now))
             request = dataclasses.replace(request, peers=tuple(c for _, c in constraints))
+        kept = self._keep(now, t0, motion, request, constraints, detour)
+        if kept is not None:
+            self._use(kept)
+            return kept.result
         # Warm-start from the previous plan, or, when that one went elsewhere (a fallback
         # stops short, a detour), from the last verified plan if that one goes to the goal.
         warm = next((plan for plan in (self.plan, self.verified) if plan is not None
@@ -329,7 +346,31 @@ class CarAgent:
             log.warning("car %d: replanning failed, keeping the previous plan: %s", self.car.id, exc)
             return None
         self._use(dataclasses.replace(outcome, blocked_by=tuple(constraints[i][0] for i in outcome.blocked_by)))
+        self._optimised_at = now if outcome.outcome in (FIRST, RETRY) and detour is None else None
         return outcome.result
+
+    def _keep(self, now: float, t0: float, motion, request: PlanRequest, constraints: list,
+              detour: np.ndarray | None) -> Outcome | None:
+        """The current plan, verified again from ``t0``, if it may be kept (module
+        docstring, "Kept plans"); else None: optimise."""
+        config = self.scenario.verify
+        plan = self.plan
+        if (config.keep_s <= 0 or not config.enabled or plan is None or plan is not self.verified
+                or self._optimised_at is None or now - self._optimised_at > config.keep_s
+                or detour is not None or self.liar is not None
+                or now < self.depart_at or np.linalg.norm(plan.positions[-1] - request.goal) > WARM_GOAL_M):
+            return None
+        (p,), (v,) = plan.state_at(t0)
+        if (np.linalg.norm(p - motion.position) > START_FROM_PLAN_M
+                or np.linalg.norm(v - motion.velocity) > START_FROM_PLAN_MPS):
+            return None
+        started = time.perf_counter()
+        verdict = verify(plan, request.peers, self._bounds([peer for peer, _ in constraints]), self.sdf, config,
+                         t_from=t0)
+        if not verdict.ok:
+            return None
+        result = PlanResult(plan, 0, math.nan, math.nan, (time.perf_counter() - started) * 1e3, True)
+        return Outcome(plan, KEPT, result, verdict, ("kept",))
 
     def _give_way(self, now: float, position: np.ndarray) -> np.ndarray | None:
         """The deadlock watch (agent.deadlock) on what we see: a detour goal while we give

@@ -78,8 +78,9 @@ from .routes import NoRoute, path_length, plan_route
 from .verify import Bounds, Conflict, Verdict, verify
 from .world import SignedDistanceField
 
-FIRST, RETRY, FALLBACK, UNVERIFIED = "first", "retry", "fallback", "unverified"
-"""Outcomes of a replan (counted per car as ``plans_<outcome>``)."""
+FIRST, RETRY, FALLBACK, UNVERIFIED, KEPT = "first", "retry", "fallback", "unverified", "kept"
+"""Outcomes of a replan (counted per car as ``plans_<outcome>``); KEPT: the previous plan,
+verified again and not optimised (agent.car_agent, VerifyConfig.keep_s)."""
 SLOWER_HORIZON = 1.5
 """The ``slower`` alternative's horizon, as a multiple of the failed one."""
 BUMP_WIDTH_S = 1.0

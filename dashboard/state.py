@@ -64,14 +64,14 @@ class CarView:
 
 
 def plan_outcomes(status: messages.StatusMessage | None) -> dict[str, int] | None:
-    """How the car's replans ended (verified first try, on retry, fallbacks) and its
+    """How the car's replans ended (verified first try, on retry, fallbacks, kept) and its
     deadlocks and steps aside, from the counters of its status (agent.safe_plan,
     agent.deadlock)."""
     if status is None:
         return None
     c = status.counters
     return {"first": c.get("plans_first", 0), "retry": c.get("plans_retry", 0),
-            "fallback": c.get("plans_fallback", 0), "deadlocks": c.get("deadlocks", 0),
+            "fallback": c.get("plans_fallback", 0), "kept": c.get("plans_kept", 0), "deadlocks": c.get("deadlocks", 0),
             "aside": c.get("deadlock_steps_aside", 0)}
 
 

@@ -70,7 +70,7 @@ def cell(runs: list[dict]) -> dict:
     pipeline = plan_outcomes([r.get("counters", {}) for r in runs])  # each run's counters are its cars' sums
     replans = sum(pipeline["plans"].values())
     out["plans"] = pipeline["plans"] | {f"{k}_share": round(pipeline["plans"][k] / replans, 4) if replans else None
-                                        for k in ("retry", "fallback")}
+                                        for k in ("retry", "fallback", "kept")}
     out["deadlocks_detected"] = pipeline["deadlocks"]
     return out
 

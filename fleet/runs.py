@@ -93,8 +93,8 @@ def rounded(matrix: np.ndarray) -> list[list[float]]:
     return [[round(float(x), 4) for x in row] for row in matrix]
 
 
-OUTCOMES = ("plans_first", "plans_retry", "plans_fallback", "plans_unverified", "deadlocks", "deadlock_yields",
-            "deadlock_steps_aside")
+OUTCOMES = ("plans_first", "plans_retry", "plans_fallback", "plans_unverified", "plans_kept", "deadlocks",
+            "deadlock_yields", "deadlock_steps_aside")
 """The counters of how a car's replans ended (agent.safe_plan) and of its deadlocks
 (agent.deadlock), as CarAgent counts them."""
 

@@ -148,7 +148,8 @@ def print_summary(summary: dict) -> None:
     print("replan ms (median / p95):  " + "  ".join(
         f"{i}: {r['median']}/{r['p95']}" if r else f"{i}: -" for i, r in summary["replan_ms"].items()))
     print("plans (verified first try / on retry / fallback), deadlocks:  " + "  ".join(
-        f"{i}: {o['first']}/{o['retry']}/{o['fallback']} {o['deadlocks']}" for i, o in summary["plan_outcomes"].items()))
+        f"{i}: {o['first']}/{o['retry']}/{o['fallback']}" + (f" (+{o['kept']} kept)" if o.get("kept") else "")
+        + f" {o['deadlocks']}" for i, o in summary["plan_outcomes"].items()))
     print("commands (Hz, lateness p99 ms, ticks stopped on a lapsed permit): " + "  ".join(
         f"{i}: {c['rate_hz']}/{c['jitter_ms_p99']}/{c.get('lease_lapsed', '-')}" if c else f"{i}: -"
         for i, c in summary["control"].items()))

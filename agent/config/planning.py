@@ -241,8 +241,17 @@ class VerifyConfig:
     fallback_decel_mps2: float = 1.0
     """Deceleration of the fallback's braking trajectory (below VehicleConfig's limit, so
     the car can follow it)."""
+    keep_s: float = 0.0
+    """Keep the plan instead of optimising anew, for up to this long after it was
+    optimised, while it still verifies from now against what the car knows now (peers'
+    newest plans and epsilons, the walls, the limits) and the car tracks it (agent.car_agent,
+    "Kept plans"); counted as ``plans_kept``. 0: optimise at every replan (the default; a
+    kept plan is checked as strictly as a new one but not improved, and the bank has not
+    measured it yet). What it saves is CPU: most replans of a car with a clear way."""
 
     def validate(self, path: str) -> None:
+        if self.keep_s < 0:
+            raise ConfigError(f"{path}.keep_s: must be >= 0")
         if not 0.0 <= self.tolerance < 1.0:
             raise ConfigError(f"{path}.tolerance: must be within [0, 1): the breach distance is never eaten")
         if self.limit_lag_m < 0:

@@ -208,7 +208,8 @@ function renderCars(cars) {
 
 function outcomes(o) {
   if (!o) return "–";
-  return `${o.first}/${o.retry}/${o.fallback} · ${o.deadlocks}/${o.aside ?? 0}`;
+  const kept = o.kept ? ` (+${o.kept} kept)` : "";
+  return `${o.first}/${o.retry}/${o.fallback}${kept} · ${o.deadlocks}/${o.aside ?? 0}`;
 }
 
 // Operator mode (trustfg dashboard --operator): the session's token comes with the page's

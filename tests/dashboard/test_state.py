@@ -89,7 +89,8 @@ def test_a_car_whose_clock_is_off_is_shown_and_alerted(intersection):
 def test_each_car_shows_how_its_replans_ended(intersection):
     view = FleetView(intersection)
     assert view.snapshot()["cars"][0]["outcomes"] is None
-    counters = {"plans_first": 40, "plans_retry": 3, "plans_fallback": 2, "deadlocks": 1, "deadlock_steps_aside": 1}
+    counters = {"plans_first": 40, "plans_retry": 3, "plans_fallback": 2, "plans_kept": 7, "deadlocks": 1,
+                "deadlock_steps_aside": 1}
     view.update(messages.StatusMessage(1, 1, 1.0, "driving", 5.0, 2, False, counters), 1.0)
-    assert view.snapshot()["cars"][0]["outcomes"] == {"first": 40, "retry": 3, "fallback": 2, "deadlocks": 1,
-                                                       "aside": 1}
+    assert view.snapshot()["cars"][0]["outcomes"] == {"first": 40, "retry": 3, "fallback": 2, "kept": 7,
+                                                       "deadlocks": 1, "aside": 1}
