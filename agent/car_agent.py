@@ -308,7 +308,7 @@ class CarAgent:
                 return None
             self.at_goal = False  # parked across a peer's only way: the detour below, then back
         t0 = max(now, self.depart_at)
-        position, velocity = self._start_state(motion, t0, now)
+        position, velocity, on_plan = self._start_state(motion, t0, now)
         remaining = self._remaining_length(motion.position, t0)
         # A car that yielded is behind schedule: its arrival slips so that it goes on at
         # its cruise speed instead of racing to catch up.
@@ -328,7 +328,7 @@ class CarAgent:
         if self.liar is not None and now >= self.depart_at:  # a framer drives where it means harm
             request, constraints = self.liar.steer(request, constraints, now, self._seen(now))
             request = dataclasses.replace(request, peers=tuple(c for _, c in constraints))
-        kept = self._keep(now, t0, motion, request, constraints, detour)
+        kept = self._keep(now, t0, on_plan, request, constraints, detour)
         if kept is not None:
             self._use(kept)
             return kept.result
@@ -349,20 +349,17 @@ class CarAgent:
         self._optimised_at = now if outcome.outcome in (FIRST, RETRY) and detour is None else None
         return outcome.result
 
-    def _keep(self, now: float, t0: float, motion, request: PlanRequest, constraints: list,
+    def _keep(self, now: float, t0: float, on_plan: bool, request: PlanRequest, constraints: list,
               detour: np.ndarray | None) -> Outcome | None:
         """The current plan, verified again from ``t0``, if it may be kept (module
-        docstring, "Kept plans"); else None: optimise."""
+        docstring, "Kept plans"); else None: optimise. ``on_plan``: the car tracks it
+        (:meth:`_start_state` starts from it; never before the departure)."""
         config = self.scenario.verify
         plan = self.plan
-        if (config.keep_s <= 0 or not config.enabled or plan is None or plan is not self.verified
+        if (config.keep_s <= 0 or not config.enabled or not on_plan or plan is not self.verified
                 or self._optimised_at is None or now - self._optimised_at > config.keep_s
                 or detour is not None or self.liar is not None
-                or now < self.depart_at or np.linalg.norm(plan.positions[-1] - request.goal) > WARM_GOAL_M):
-            return None
-        (p,), (v,) = plan.state_at(t0)
-        if (np.linalg.norm(p - motion.position) > START_FROM_PLAN_M
-                or np.linalg.norm(v - motion.velocity) > START_FROM_PLAN_MPS):
+                or np.linalg.norm(plan.positions[-1] - request.goal) > WARM_GOAL_M):
             return None
         started = time.perf_counter()
         verdict = verify(plan, request.peers, self._bounds([peer for peer, _ in constraints]), self.sdf, config,
@@ -414,19 +411,19 @@ class CarAgent:
         self.counters["peers_out_of_reach"] += outcome.result.peers_out_of_reach
         self.replan_ms.append(outcome.result.time_ms)
 
-    def _start_state(self, motion, t0: float, now: float) -> tuple[np.ndarray, np.ndarray]:
-        """Where the new plan starts: our previous plan's state at t0 while we track it
-        closely (the reference stays continuous across replans, so the car does not
-        jerk at every replan), else the measured state."""
+    def _start_state(self, motion, t0: float, now: float) -> tuple[np.ndarray, np.ndarray, bool]:
+        """Where the new plan starts, and whether that is on our plan: our previous plan's
+        state at t0 while we track it closely (the reference stays continuous across
+        replans, so the car does not jerk at every replan), else the measured state."""
         if now < self.depart_at:
-            return motion.position, np.zeros(2)
+            return motion.position, np.zeros(2), False
         if self.plan is not None:
             (p,), (v,) = self.plan.state_at(t0)
             if (np.linalg.norm(p - motion.position) <= START_FROM_PLAN_M
                     and np.linalg.norm(v - motion.velocity) <= START_FROM_PLAN_MPS):
-                return p, v
+                return p, v, True
         self.counters["replan_from_measured"] += 1
-        return motion.position, motion.velocity
+        return motion.position, motion.velocity, False
 
     def _remaining_length(self, position: np.ndarray, t0: float) -> float:
         if self.plan is None:
