@@ -31,8 +31,12 @@ Measured per run, from mocap-sim's ground truth and the recorded messages:
                       old, or the car's own 250 ms watchdog), from mocap-sim's command log
                       at physics resolution (5 ms); standstill follows after braking
                       (v / 1.5 m/s^2)
-    time_to_recover_s from the heal (or the restart) until every car's status reports a
-                      plan younger than 1 s from every peer: plans resynchronised
+    time_to_recover_s from the heal until every car's status reports a plan younger than
+                      1 s from every peer: plans resynchronised; after a restart, from
+                      the restarted process's first status (its start-up is the next)
+    time_to_rejoin_s  from the restart until the restarted process's first status: the
+                      start-up of a car process (interpreter, GTSAM, Zenoh, NatNet) on
+                      this machine
     honest_trust_min  least trust any car still reports in any peer at the end: silence
                       and loss must not read as lying
     trust_after_3s    least trust any car reported in any peer from 3 s after the start
@@ -78,6 +82,9 @@ class Case:
     """The victim loses its pose, process or link ("fault:" event): time it takes to stop."""
     measures_recovery: bool = False
     """The victim rejoins ("heal:" event): time until plans are resynchronised."""
+    restarts: bool = False
+    """The heal starts the victim's process anew: recovery counts from its first status
+    (the process up and on the bus), and the start-up before it is reported apart."""
     link_cut: bool = False
 
 
@@ -208,7 +215,7 @@ CASES = {case.name: case for case in [
                                 (7.0, lambda s, c: (c.note(f"heal: car {VICTIM} rejoins"), s.lab.clear(VICTIM)))],
          measures_recovery=True),
     Case("kill-restart", prepare=_rejoin, schedule=[(4.0, when_moving(_kill)), (6.0, _restart)], measures_stop=True,
-         measures_recovery=True),
+         measures_recovery=True, restarts=True),
     Case("mocap-drop-30", prepare=lambda s: s.mocap_args.append("--drop-rate=0.3")),
     Case("occlusion", schedule=[(4.0, when_moving(lambda s, c: (
         s.control({"occlude": VICTIM, "seconds": 1.0}), c.note(f"fault: occlude car {VICTIM} for 1 s"))))],
@@ -244,7 +251,7 @@ def measure(case: Case, summary: dict, out: Path) -> dict:
     row = {
         "case": case.name, "breaches": len(summary["breaches"]),
         "goals": sum(summary["reached_goal"]), "cars": len(ids), "crashed": summary["crashed"],
-        "time_to_stop_s": None, "time_to_recover_s": None,
+        "time_to_stop_s": None, "time_to_recover_s": None, "time_to_rejoin_s": None,
         "honest_trust_min": min((v for r in summary["trust"] for v in r if v is not None), default=None),
         "wall_clearance_m": summary["obstacle_min_clearance"],
         "trust_after_3s": summary.get("honest_trust_min_after_settle"),
@@ -256,7 +263,13 @@ def measure(case: Case, summary: dict, out: Path) -> dict:
     if case.measures_stop and fault is not None and t_go is not None:
         row["time_to_stop_s"] = _time_to_stop(out / "commands.csv", VICTIM, t_go + fault)
     if case.measures_recovery and heal is not None and t_go is not None:
-        row["time_to_recover_s"] = _time_to_recover(out / "messages.jsonl", ids, t_go + heal)
+        since = t_go + heal
+        if case.restarts:
+            back = _first_status(out / "messages.jsonl", VICTIM, since)
+            row["time_to_rejoin_s"] = None if back is None else round(back - since, 3)
+            since = back
+        if since is not None:
+            row["time_to_recover_s"] = _time_to_recover(out / "messages.jsonl", ids, since)
     row["plan_age_ms_p50"], row["plan_age_ms_p99"] = plan_age_percentiles(out / "messages.jsonl", t_go)
     row["breach_pairs"] = summary["breaches"]
     row["not_arrived"] = not_arrived(out, summary)
@@ -327,6 +340,17 @@ def _time_to_stop(commands: Path, car: int, onset: float) -> float | None:
     return round(after[0][0] - onset, 3) if after else float("inf")
 
 
+def _first_status(messages_path: Path, car_id: int, since: float) -> float | None:
+    """When car ``car_id``'s first status after ``since`` was recorded (None: none was)."""
+    with open(messages_path) as f:
+        for line in f:
+            record = json.loads(line)
+            if (record.get("kind") == "status" and "message" in record and record["t"] >= since
+                    and record["message"]["id"] == car_id):
+                return record["t"]
+    return None
+
+
 def _time_to_recover(messages_path: Path, ids: list[int], heal: float) -> float | None:
     """From the heal until every car has had a fresh plan from every peer."""
     fresh: dict[int, bool] = {}
@@ -366,6 +390,9 @@ def table(rows: list[dict]) -> str:
             recover = "-"
         else:
             recover = "never" if None in recovers else f"{max(recovers):.2f}"
+            rejoins = [r.get("time_to_rejoin_s") for r in group]
+            if CASES[name].restarts and None not in rejoins:
+                recover += f" (after {max(rejoins):.2f} s of start-up)"
         cells = [name, len(group), sum(r["breaches"] for r in group),
                  f"{sum(r['goals'] for r in group)}/{sum(r['cars'] for r in group)}",
                  f"{max(stops):.3f}" if stops else "-", recover,

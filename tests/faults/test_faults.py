@@ -13,9 +13,11 @@ pytestmark = [pytest.mark.faults,
               pytest.mark.skipif(netem.available() is not None, reason=str(netem.available()))]
 
 STOP_WITHIN_S = 0.25 + 0.02  # the 250 ms watchdog, plus mocap-sim's physics scheduling (5 ms ticks)
-RECOVER_WITHIN_S = 3.0  # plans resynchronised after a heal or restart (measured 0.8-1.4 s)
+RECOVER_WITHIN_S = 3.0  # plans resynchronised after a heal, or once a restarted process is up (measured 0.8-1.4 s)
+REJOIN_WITHIN_S = 10.0  # a restarted car process back on the bus: it came back (its start-up, 2.1 s on 2 busy
+# cores, is a speed of this machine, reported as time_to_rejoin_s by `trustfg faults`, not a timed test)
 TRUST_FLOOR = 0.6  # below the prior (2/3) only by evidence of misbehaviour, never by silence
-PLAN_AGE_P99_MS = 1000  # a car's view of every peer's plan at 10, 30 and 50 % loss (best-effort plans;
+PLAN_AGE_P99_MS = 1000  # a car's view of every peer's plan at 50 % loss (best-effort plans;
 # at 50 % it held in 24 of 24 runs once Zenoh got more receiving threads, fleet/bus.py RX_THREADS)
 PLAN_AGE_P50_MS_AT_50 = 300  # at 50 %: fresh most of the time (TCP alone: p50 8.5 s)
 
@@ -23,7 +25,8 @@ PLAN_AGE_P50_MS_AT_50 = 300  # at 50 %: fresh most of the time (TCP alone: p50 8
 SUBSUMED = {
     "baseline": "every case asserts what the fault-free run does (no crash, no breach, every goal, trust)",
     "delay-50ms": "lossy-clock has the same delay, with loss and a skewed clock on top, and asserts more",
-    "loss-10": "loss-30 and loss-50 assert the same at more loss",
+    "loss-10": "loss-50 asserts the same at more loss",
+    "loss-30": "loss-50 asserts the same at more loss, and lossy-clock has 30 % loss with delay and a skewed clock",
 }
 """Cases the CLI matrix (``trustfg faults``) runs and the suite leaves out, and why: a
 case costs about 20 s of the suite's 15-minute budget."""
@@ -45,6 +48,8 @@ def test_fault(name, tmp_path):
         assert row["time_to_stop_s"] is not None and row["time_to_stop_s"] <= STOP_WITHIN_S, row
     if case.measures_recovery:
         assert row["time_to_recover_s"] is not None and row["time_to_recover_s"] <= RECOVER_WITHIN_S, row
+    if case.restarts:
+        assert row["time_to_rejoin_s"] is not None and row["time_to_rejoin_s"] <= REJOIN_WITHIN_S, row
     assert row["honest_trust_min"] >= TRUST_FLOOR, row
     if name == "lossy-clock":  # an honest fleet under loss, delay and a skewed clock stays trusted
         assert row["trust_after_3s"] is not None, row
@@ -52,8 +57,7 @@ def test_fault(name, tmp_path):
         # lost (agent/evidence.py): 42 of 42 runs at 0.8 or above (`trustfg faults --cases
         # lossy-clock --seeds 8` four times and `--seeds 10` once; least 0.823).
         assert row["trust_after_3s"] >= 0.8, row
-    if name in ("loss-30", "loss-50"):
-        assert row["plan_age_ms_p99"] <= PLAN_AGE_P99_MS, row
     if name == "loss-50":
+        assert row["plan_age_ms_p99"] <= PLAN_AGE_P99_MS, row
         assert row["plan_age_ms_p50"] <= PLAN_AGE_P50_MS_AT_50, row
         assert row["trust_after_3s"] is not None and row["trust_after_3s"] >= 0.8, row  # loss is no lie
