@@ -6,7 +6,7 @@ import sys
 
 def test_experiment_command_writes_metrics_and_figures(tmp_path):
     done = subprocess.run(
-        [sys.executable, "-m", "trustfg", "experiment", "lab", "--seeds", "1", "--jobs", "1",
+        [sys.executable, "-m", "trustfg", "experiment", "lab", "--seeds", "1", "--jobs", "2",
          "--out", str(tmp_path)], capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
     assert "min distance matrix A" in done.stdout and "min distance matrix B" in done.stdout
@@ -32,7 +32,7 @@ def test_studies_write_their_tables(tmp_path):
     """The adversaries experiment and the transparency sweep, one seed each, end to end."""
     done = subprocess.run(
         [sys.executable, "-m", "trustfg", "experiment", "adversaries", "--seeds", "1", "--scenes", "intersection",
-         "--attacks", "displaced", "--variants", "on", "off", "--held-out", "--jobs", "1", "--out", str(tmp_path)],
+         "--attacks", "displaced", "--variants", "on", "off", "--held-out", "--jobs", "2", "--out", str(tmp_path)],
         capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
     report = json.loads((tmp_path / "adversaries" / "metrics.json").read_text())
@@ -41,7 +41,7 @@ def test_studies_write_their_tables(tmp_path):
     assert "| intersection | displaced | off |" in (tmp_path / "adversaries" / "table.md").read_text()
     done = subprocess.run(
         [sys.executable, "-m", "trustfg", "experiment", "transparency-sweep", "--seeds", "1", "--scene", "intersection",
-         "--misinformation", "0.4", "--gains", "2", "--jobs", "1", "--out", str(tmp_path)],
+         "--misinformation", "0.4", "--gains", "2", "--jobs", "2", "--out", str(tmp_path)],
         capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
     report = json.loads((tmp_path / "transparency-sweep" / "metrics.json").read_text())

@@ -28,7 +28,7 @@ KEYS = ["name", "fleet", "cars", "world", "planner", "trust", "vehicle", "tracki
         "id", "start", "goal", "route", "bounds_m", "obstacles", "support_states", "qc", "kind", "min", "max"]
 
 
-@settings(max_examples=3000, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=1000, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.dictionaries(st.sampled_from(KEYS), TOML_VALUES, max_size=8))
 def test_config_loader_refuses_anything_malformed_with_config_error_only(data):
     try:
@@ -37,7 +37,7 @@ def test_config_loader_refuses_anything_malformed_with_config_error_only(data):
         pass
 
 
-@settings(max_examples=1500, deadline=None)
+@settings(max_examples=600, deadline=None)
 @given(st.lists(st.tuples(st.sampled_from(["planner", "world", "sim", "trust"]),
                           st.sampled_from(["qc", "support_states", "bounds_m", "forgetting", "timeout_s", "x"]),
                           TOML_VALUES), max_size=4))
