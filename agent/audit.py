@@ -177,7 +177,7 @@ class Ledger:
         c = self.config
         now_reach = track.last_stamp + NEAREST_S  # lag 0: at once
         late_reach = track.last_stamp - c.audit_grace_s  # later: once a newer plan had time to arrive
-        out = []
+        due = []  # (claim, start, end): the checks that came due, read against the track at once
         claims = list(self.claims)
         for i, claim in enumerate(claims):
             heard = i + 1 < len(claims)
@@ -199,25 +199,30 @@ class Ledger:
                     break
                 end += 1
             claim.next = len(claim.times) if done else end
-            if end <= start:
-                continue
-            times, said = claim.times[start:end], claim.said[start:end]
+            if end > start:
+                due.append((claim, start, end))
+        out, rows, k = [], [], 0
+        if due:  # one look-up for every claim's due checks (a few each; numpy's cost is per call)
+            times = np.concatenate([claim.times[start:end] for claim, start, end in due])
+            said = np.concatenate([claim.said[start:end] for claim, start, end in due])
             seen, valid = track.positions_at(times)
-            misses = np.linalg.norm(said - seen, axis=1)
-            for t, miss, ok in zip(times, misses, valid):
+            rows = list(zip(times.tolist(), np.linalg.norm(said - seen, axis=1).tolist(), valid.tolist()))
+        for claim, start, end in due:
+            checks, k = rows[k:k + end - start], k + end - start
+            for t, miss, ok in checks:
                 first = not claim.checked_now
                 claim.checked_now = True
                 if not ok:
                     self.unverifiable += first
                     continue  # not seen at that moment: nothing to compare
-                lag = float(t - claim.stamp)
-                fail = graded_failure(float(miss), tolerance(lag, c))
+                lag = t - claim.stamp
+                fail = graded_failure(miss, tolerance(lag, c))
                 if first and lag < 1e-9:
                     success, failure = 1.0 - fail, fail
                 else:
                     success, failure = 0.0, max(0.0, fail - claim.failure)
                 claim.failure = max(claim.failure, fail)
-                out.append(Check(claim, lag, float(miss), success, failure, rejected=miss > reject_threshold(lag, c)))
+                out.append(Check(claim, lag, miss, success, failure, rejected=miss > reject_threshold(lag, c)))
         while self.claims and self.claims[0].next >= len(self.claims[0].times):
             self.claims.popleft()
         return out
