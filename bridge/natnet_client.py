@@ -51,6 +51,7 @@ Sockets always have timeouts, so ``close()`` stops and joins within a bounded ti
 from __future__ import annotations
 
 import logging
+import math
 import socket
 import sys
 import threading
@@ -114,6 +115,8 @@ class NatNetClientOptions:
     close_timeout_s: float = 2.0
     receive_buffer_bytes: int = 1 << 20
     frame_restart_threshold: int = 600
+    max_frame_rate_hz: float = 0.0
+    """Decode at most this many frames a second (0: every frame); see FrameReceiver."""
 
     def __post_init__(self) -> None:
         if self.multicast and not self.handshake and self.natnet_version is None:
@@ -122,6 +125,8 @@ class NatNetClientOptions:
                      "reconnect_after_s", "poll_timeout_s", "close_timeout_s"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be > 0")
+        if not (math.isfinite(self.max_frame_rate_hz) and self.max_frame_rate_hz >= 0):
+            raise ValueError("max_frame_rate_hz must be >= 0 (0: every frame)")
 
 
 def client_options(n: NatNetConfig) -> NatNetClientOptions:
@@ -206,7 +211,8 @@ class NatNetClient:
             raise NatNetConnectionError(f"cannot set up the NatNet sockets: {exc}") from exc
         version = self._choose_version()
         self._receiver = FrameReceiver(version, self._on_frame, pinned=o.natnet_version is not None,
-                                       restart_threshold=o.frame_restart_threshold)
+                                       restart_threshold=o.frame_restart_threshold,
+                                       max_rate_hz=o.max_frame_rate_hz)
         self._receiver.server_info = self._server_info
         if model_packet is not None:
             self._receiver.handle(model_packet, time.monotonic())

@@ -12,6 +12,7 @@ ids) and calls an optional ``on_frame`` callback.
 from __future__ import annotations
 
 import logging
+import math
 import threading
 from collections import Counter
 from dataclasses import dataclass, field
@@ -47,6 +48,7 @@ class NatNetStats:
     other: int = 0  # non-frame messages (SERVERINFO, responses, ...)
     callback_errors: int = 0
     last_frame_number: int | None = None
+    skipped: int = 0  # frames over the receiver's rate cap, left undecoded
 
     @property
     def rejected_total(self) -> int:
@@ -63,8 +65,11 @@ class FrameReceiver:
     """
 
     def __init__(self, version: Version | None, on_frame: Callable[[Frame], None] | None = None,
-                 *, pinned: bool = False, restart_threshold: int = 600) -> None:
+                 *, pinned: bool = False, restart_threshold: int = 600, max_rate_hz: float = 0.0) -> None:
         self._version = version
+        self._period = 1.0 / max_rate_hz if max_rate_hz > 0 else 0.0
+        self._due = -math.inf
+        self._skipped = 0
         self._pinned = pinned
         self._on_frame = on_frame
         self._restart_threshold = restart_threshold
@@ -95,6 +100,11 @@ class FrameReceiver:
                 return None
             if self._version is None:
                 raise NatNetError("frame before the NatNet version is known", "no_version")
+            if self._over_rate(received_s):
+                if _models_changed_hint(payload):
+                    with self._cond:
+                        self.models_changed = True
+                return None
             frame = natnet.decode_frame(payload, self._version)
         except NatNetError as exc:
             self._reject(exc.reason, str(exc))
@@ -109,6 +119,23 @@ class FrameReceiver:
                     self._callback_errors += 1
                 log.exception("NatNet on_frame callback failed on frame %d", frame.frame_number)
         return frame
+
+    def _over_rate(self, received_s: float) -> bool:
+        """Whether a frame arriving at ``received_s`` is over ``max_rate_hz`` (then it is
+        counted and left undecoded). Frames are taken at the first arrival at or after
+        each due time, due times 1/max_rate_hz apart: the rate taken is the cap on average
+        whatever the stream's rate (120 Hz capped at 50: every second or third frame); a
+        stream slower than the cap, or a gap, resets the schedule."""
+        if not self._period:
+            return False
+        if received_s < self._due:
+            with self._cond:
+                self._skipped += 1
+            return True
+        self._due += self._period
+        if self._due < received_s:  # the first frame, a gap, or a stream slower than the cap
+            self._due = received_s + self._period
+        return False
 
     def _handle_other(self, message_id: int, payload: memoryview) -> None:
         with self._cond:
@@ -178,10 +205,21 @@ class FrameReceiver:
         with self._cond:
             return NatNetStats(self._received, self._decoded,
                                MappingProxyType(dict(self._rejected)), self._dropped,
-                               self._other, self._callback_errors, self._last_frame)
+                               self._other, self._callback_errors, self._last_frame, self._skipped)
 
     def wait_for_frames(self, count: int, timeout_s: float) -> bool:
         """Block until ``count`` frames in total have been accepted, or the timeout passes."""
         with self._cond:
             return self._cond.wait_for(lambda: self._decoded >= count, timeout_s)
 
+
+def _models_changed_hint(payload: memoryview | bytes) -> bool:
+    """Whether an undecoded frame may say that Motive's tracked models changed: its frame
+    params (uint16, bit 0x02) end the frame, or come just before a zero end-of-data tag.
+    A frame without the tag whose last four bytes are zero is read as having it: that may
+    flag a change that was none (one MODELDEF asked for too many), never miss one."""
+    tail = bytes(payload[-6:])
+    if len(tail) < 6:
+        return False
+    params = tail[0:2] if tail[2:] == b"\0\0\0\0" else tail[4:6]
+    return bool(int.from_bytes(params, "little") & 0x02)

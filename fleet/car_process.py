@@ -87,7 +87,10 @@ class CarProcess:
             log.warning("car %d: running with a clock %+.3f s off the fleet's (clock_offset_s, for tests)",
                         car.id, car.clock_offset_s)
         self.clock = clock or (lambda: time.time() + car.clock_offset_s)
-        self.natnet = client_options(scenario.natnet)
+        # The agent takes poses at the command rate, as in the in-process fleet (its
+        # validated rate): the frames between are left undecoded (Motive streams 120-360 Hz).
+        self.natnet = dataclasses.replace(client_options(scenario.natnet),
+                                          max_frame_rate_hz=scenario.control.command_rate_hz)
         link_key(car)  # a missing or bad key is a config error now, not when driving
         self.stop = threading.Event()
         self.sdf = build_sdf(scenario.world)

@@ -154,7 +154,7 @@ def write_stats(path: Path, process: Any, bus: FleetBus | None) -> None:
         "inbox_dropped": dict(process.inbox.dropped),
         "inbox_accepted": dict(process.inbox.accepted),
         "bus": dict(bus.counters) if bus is not None else {},
-        "natnet": {"received": nat.received, "decoded": nat.decoded, "dropped": nat.dropped,
+        "natnet": {"received": nat.received, "decoded": nat.decoded, "skipped": nat.skipped, "dropped": nat.dropped,
                    "rejected": dict(nat.rejected)} if nat is not None else None,
         "link_sent": process.command.link.get("link_sent"),
         "link_answers": process.command.link.get("link_answers"),

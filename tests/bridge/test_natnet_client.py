@@ -4,6 +4,7 @@ against a scripted fake server (the real simulator server is in tests/mocap_sim)
 from __future__ import annotations
 
 import socket
+import struct
 import threading
 import time
 
@@ -107,11 +108,47 @@ def test_wait_for_frames_is_woken_by_the_receiving_thread():
     feeder.join(5.0)
 
 
+def test_a_rate_cap_decodes_the_cap_on_average_and_counts_the_rest():
+    """120 Hz capped at 50 Hz: 50 frames a second decoded, every second or third; a stream
+    slower than the cap is taken whole; no cap takes every frame."""
+    def feed(receiver, rate_hz, seconds=2.0):
+        taken = [receiver.handle(frame_packet(k + 1), k / rate_hz) is not None for k in range(int(seconds * rate_hz))]
+        return taken, receiver.stats()
+
+    taken, stats = feed(FrameReceiver(V3_0, max_rate_hz=50.0), 120.0)
+    assert stats.decoded == sum(taken) == 100 and stats.skipped == 240 - 100 and stats.rejected_total == 0
+    kept = [k for k, t in enumerate(taken) if t]
+    assert {b - a for a, b in zip(kept, kept[1:])} <= {2, 3}
+    _, stats = feed(FrameReceiver(V3_0, max_rate_hz=50.0), 30.0)
+    assert stats.decoded == 60 and stats.skipped == 0
+    _, stats = feed(FrameReceiver(V3_0), 120.0)
+    assert stats.decoded == 240 and stats.skipped == 0
+
+
+@pytest.mark.parametrize("end_tag", [True, False])
+def test_a_skipped_frame_still_tells_that_motives_models_changed(end_tag):
+    receiver = FrameReceiver(V3_0, max_rate_hz=50.0)
+    assert receiver.handle(frame_packet(1), 0.0) is not None
+    payload = nn.encode_frame(Frame(2, (RigidBody(1, *POSE),), 2 / 120, params=0x02), V3_0)
+    if not end_tag:
+        payload = payload[:-4]  # the SDK's samples do not read the tag; a server may leave it out
+    changed = struct.pack("<HH", MessageId.FRAMEOFDATA, len(payload)) + payload
+    assert receiver.handle(changed, 1 / 120) is None and receiver.stats().skipped == 1
+    assert receiver.models_changed
+    quiet = FrameReceiver(V3_0, max_rate_hz=50.0)
+    quiet.handle(frame_packet(1), 0.0)
+    quiet.handle(frame_packet(2), 1 / 120)
+    assert quiet.stats().skipped == 1 and not quiet.models_changed
+
+
 def test_options_are_validated():
     with pytest.raises(ValueError, match="natnet_version"):
         NatNetClientOptions(multicast=True, handshake=False)
     with pytest.raises(ValueError):
         NatNetClientOptions(connect_timeout_s=0)
+    for rate in (-1.0, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="max_frame_rate_hz"):
+            NatNetClientOptions(max_frame_rate_hz=rate)
     NatNetClientOptions(multicast=True, handshake=False, natnet_version=V3_0)
 
 
