@@ -201,6 +201,10 @@ class CarAgent:
 
     # --- evidence ---------------------------------------------------------------------------
 
+    def next_evidence_at(self) -> float:
+        """When gather_evidence will next gather (it is rate-limited)."""
+        return self._last_evidence + self.scenario.trust.evidence_period_s
+
     def gather_evidence(self, now: float) -> None:
         """Safety and consistency evidence about every seen peer (rate-limited)."""
         config = self.scenario.trust

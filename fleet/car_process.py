@@ -341,7 +341,11 @@ class CarProcess:
                 next_say = now + 1.0
                 self._on_bus = bus.on_bus()
                 self._waiting.say(self.state, self.waiting_for(now), now)
-            bus.wait(0.005)  # wakes at once when a message arrives
+            # Until the next thing due (a message wakes it at once), at most a command
+            # period: the permit, the deadman and the operator's flags are looked at in each pass.
+            due = min(next_replan, next_plan, next_trust, next_pose, next_status, next_say,
+                      self.agent.next_evidence_at())
+            bus.wait(min(max(due - self.clock(), 0.0), 1.0 / control.command_rate_hz))
 
     def _state(self) -> str:
         mode = self.operation.mode
