@@ -54,8 +54,9 @@ def test_fault(name, tmp_path):
     if name == "lossy-clock":  # an honest fleet under loss, delay and a skewed clock stays trusted
         assert row["trust_after_3s"] is not None, row
         # Issue 10's acceptance point, met since a plan held up in a stalled link counts as
-        # lost (agent/evidence.py): 42 of 42 runs at 0.8 or above (`trustfg faults --cases
-        # lossy-clock --seeds 8` four times and `--seeds 10` once; least 0.823).
+        # lost (agent/evidence.py): 45 of 45 runs at 0.8 or above (`trustfg faults --cases
+        # lossy-clock --seeds 8` four times, `--seeds 10` once, the whole matrix with
+        # `--seeds 3` once; least 0.823).
         assert row["trust_after_3s"] >= 0.8, row
     if name == "loss-50":
         assert row["plan_age_ms_p99"] <= PLAN_AGE_P99_MS, row
