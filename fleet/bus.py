@@ -18,9 +18,14 @@ drove a whole run without one peer's plans, and in another without anything from
 peer after the first seconds). So ``drain()`` also watches (:func:`silent_kinds`): a car
 whose liveliness token is up but that was not heard on kind K for ``SILENT_S`` has K
 subscribed again, at most every ``RESUBSCRIBE_EVERY_S`` (counted:
-``resubscribed_<kind>``). A car that only stopped publishing K, or is cut off behind a
-partition, costs a redeclaration every few seconds, no more. A car whose token never
-reached us but that we hear is watched too (:func:`present`).
+``resubscribed_<kind>``). A kind the car sends ten times a second (``FREQUENT``: plans,
+poses) is subscribed again sooner, once the car is heard on another kind ``BEHIND_S``
+after it was last heard on this one (or first heard at all): at 50 % loss the redeclared
+subscription itself takes a second or two to reach the peer, and three seconds of
+silence first left a car without a peer's plans for 4.5 s of a run (CI, loss-50). A car
+that only stopped publishing K, or is cut off behind a partition, costs a redeclaration
+every few seconds, no more. A car whose token never reached us but that we hear is
+watched too (:func:`present`).
 
 The watch also tells when this process hears nothing from any live car for ``DEAF_S``
 (a deaf spell: a warning with the session's links when it starts and when it ends,
@@ -64,6 +69,13 @@ SILENT_S = 3.0
 """With the control defaults a car publishes every kind at least every 0.5 s (status and
 trust 0.5 s, plans 0.1 s, poses 0.05 s): three seconds without one is a lost subscription,
 not a gap (a lab that sets slower periods pays a needless redeclaration now and then)."""
+FREQUENT = ("plan", "pose")
+BEHIND_S = 1.0
+"""A car publishes plans every 0.1 s and poses every 0.05 s (control defaults), from its
+first own pose on. One of them a second behind the car's other kinds is ten or more sent
+and none heard: at 50 % loss, independent per packet, once in a thousand such seconds --
+a lost subscription, not loss. (Trust reports and status come every 0.5 s: two missed
+are common, so they wait for SILENT_S.)"""
 RESUBSCRIBE_EVERY_S = 5.0
 DEAF_S = 1.5
 """Nothing from any live car for this long is a deaf spell: every car publishes a pose
@@ -86,17 +98,23 @@ def present(alive: dict[int, bool], heard: dict[tuple[int, str], float], now: fl
 
 
 def silent_kinds(heard: dict[tuple[int, str], float], alive: dict[int, bool], kinds: tuple[str, ...],
-                 now: float, opened: float) -> dict[str, list[int]]:
+                 now: float, opened: float, first: dict[int, float] | None = None) -> dict[str, list[int]]:
     """Per kind, the cars whose liveliness token is up but that were not heard on it for
-    SILENT_S (counted from the session's opening for a car never heard on it)."""
+    SILENT_S (counted from the session's opening for a car never heard on it), or -- a
+    FREQUENT kind -- that were heard on another kind BEHIND_S after they were last heard
+    on it (or, never heard on it, after ``first[car]``: when they were first heard at all;
+    a car only starting has no plan to send for its first few tenths of a second)."""
     out: dict[str, list[int]] = {}
-    if now - opened < SILENT_S:
-        return out
+    first = first or {}
     for car, up in alive.items():
         if not up:
             continue
+        latest = max((heard.get((car, kind), -math.inf) for kind in kinds), default=-math.inf)
         for kind in kinds:
-            if now - max(heard.get((car, kind), -math.inf), opened) > SILENT_S:
+            last = max(heard.get((car, kind), -math.inf), opened)
+            silent = now - opened >= SILENT_S and now - last > SILENT_S
+            behind = kind in FREQUENT and latest - max(last, first.get(car, -math.inf)) > BEHIND_S
+            if silent or behind:
                 out.setdefault(kind, []).append(car)
     return out
 
@@ -226,6 +244,7 @@ class FleetBus:
         self._subscribers: dict[str, object] = {}
         """The car kinds' subscribers, by kind (declared again when one goes silent)."""
         self._heard: dict[tuple[int, str], float] = {}
+        self._first_heard: dict[int, float] = {}
         self._opened = math.inf
         self._next_watch = 0.0
         self._deaf_since: float | None = None
@@ -316,23 +335,24 @@ class FleetBus:
             return
         self._next_watch = now + WATCH_PERIOD_S
         with self._lock:  # the callbacks' threads write both
-            heard, tokens = dict(self._heard), dict(self.alive)
+            heard, tokens, first = dict(self._heard), dict(self.alive), dict(self._first_heard)
         alive = present(tokens, heard, now)
         self.counters["peers_without_token"] = sum(1 for car in alive if car not in tokens)
         if self.car_id is not None:
             alive[self.car_id] = False  # never watch ourselves
         self._watch_deafness(heard, alive, now)
-        for kind, cars in silent_kinds(heard, alive, self.kinds, now, self._opened).items():
+        for kind, cars in silent_kinds(heard, alive, self.kinds, now, self._opened, first).items():
             if now - self._resubscribed.get(kind, -math.inf) < RESUBSCRIBE_EVERY_S:
                 continue
             self._resubscribed[kind] = now
             # Lost (heard on K before) is worth a warning; never heard since the session
             # opened is most often a car still starting up.
             lost = [car for car in cars if (car, kind) in heard]
+            quiet_s = max(now - max(heard.get((car, kind), -math.inf), self._opened) for car in cars)
             log.log(logging.WARNING if lost else logging.INFO,
-                    "%s: no %s from car%s %s for %.0f s, though %s token is up: subscribing to %s again",
+                    "%s: no %s from car%s %s for %.1f s, though %s token is up: subscribing to %s again",
                     self._me, kind, "s" if len(cars) > 1 else "",
-                    ", ".join(map(str, cars)), SILENT_S, "their" if len(cars) > 1 else "its", kind)
+                    ", ".join(map(str, cars)), quiet_s, "their" if len(cars) > 1 else "its", kind)
             try:
                 self._subscribers[kind].undeclare()
             except Exception as exc:  # already gone: declare anew all the same
@@ -444,6 +464,7 @@ class FleetBus:
                 self.counters["dropped_queue_full"] += 1
             self._queue.append(item)
             self._heard[(sender, kind)] = item.at
+            self._first_heard.setdefault(sender, item.at)
             self.counters[f"received_{kind}"] += 1
         self._arrived.set()
 

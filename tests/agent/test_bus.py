@@ -205,6 +205,25 @@ def test_silent_kinds_are_those_a_live_car_is_not_heard_on():
     assert silent_kinds(heard, alive, kinds, now, opened=now - SILENT_S - 0.1) == {"plan": [1]}
 
 
+def test_a_frequent_kind_behind_the_cars_other_kinds_is_declared_again_sooner():
+    """Plans (ten a second) a second behind the car's trust reports are a lost
+    subscription, not loss: declared again without waiting SILENT_S. Trust reports (two
+    a second) wait for SILENT_S; a car only starting has no plan to send yet."""
+    from trustfg.fleet.bus import BEHIND_S, silent_kinds
+    kinds = ("plan", "trust")
+    now, opened = 100.0, 98.0  # within SILENT_S of the opening
+    alive = {1: True, 2: True, 3: True, 4: True}
+    heard = {(1, "trust"): now - 0.1, (1, "plan"): now - BEHIND_S - 0.2,  # plans lost
+             (2, "trust"): now - 0.1, (2, "plan"): now - BEHIND_S + 0.2,  # a gap
+             (3, "plan"): now - 0.1, (3, "trust"): now - BEHIND_S - 0.5,  # trust: waits
+             (4, "trust"): now - 0.1}  # never heard on plans
+    first = {1: 98.5, 2: 98.5, 3: 98.5, 4: now - 0.5}  # car 4 first heard half a second ago
+    assert silent_kinds(heard, alive, kinds, now, opened, first) == {"plan": [1]}
+    first[4] = now - BEHIND_S - 0.3  # heard for longer, and still no plan
+    assert silent_kinds(heard, alive, kinds, now, opened, first) == {"plan": [1, 4]}
+    assert silent_kinds(heard, alive, kinds, now, opened) == {"plan": [1, 4]}  # first unknown: the opening
+
+
 def test_a_car_whose_token_never_came_is_on_the_bus_while_it_is_heard():
     from trustfg.fleet.bus import SILENT_S, present
     now = 100.0
@@ -296,6 +315,32 @@ def test_a_subscription_zenoh_lost_is_declared_again(watching, monkeypatch):
         assert heard("status", 4.0) is watching
         assert heard("pose", 1.0)
         assert one.counters["resubscribed_status"] == (1 if watching else 0)
+
+
+def test_poses_lost_while_the_car_is_heard_come_back_within_seconds(monkeypatch):
+    """A FREQUENT kind (poses here, plans in a car) lost while the car's status still
+    arrives is declared again by BEHIND_S's rule alone (SILENT_S's is off)."""
+    status = status_of(2)
+    with two_cars_watched(monkeypatch, math.inf) as (one, two):
+
+        def heard(kind: str, within_s: float) -> float | None:
+            started = time.monotonic()
+            while time.monotonic() - started < within_s:
+                two.publish("pose", pose(2, 1))
+                two.publish("status", status)
+                if any(r.kind == kind for r in one.drain()):
+                    return time.monotonic() - started
+                time.sleep(0.05)
+            return None
+
+        assert heard("pose", 5.0) is not None
+        one._subscribers["pose"].undeclare()  # lost, as Zenoh lost it
+        time.sleep(0.3)
+        one.drain()
+        back_after_s = heard("pose", 4.0)
+        print(f"poses back after {back_after_s} s")
+        assert back_after_s is not None
+        assert one.counters["resubscribed_pose"] == 1 and one.counters["resubscribed_status"] == 0
 
 
 def test_a_live_car_heard_on_nothing_has_every_kind_declared_again(monkeypatch):
