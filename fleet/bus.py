@@ -290,8 +290,12 @@ class FleetBus:
                 session, key(fleet, cid, "plan"), cache=zext.CacheConfig(max_samples=1),
                 publisher_detection=True, sample_miss_detection=zext.MissDetectionConfig(heartbeat=0.5),
                 reliability=zenoh.Reliability.RELIABLE, congestion_control=zenoh.CongestionControl.DROP)
+            # Trust reports best effort too: each supersedes the last (every
+            # control.trust_report_period_s), and at 50 % loss a reliable report waited
+            # behind TCP retransmissions for up to 13 s, then came stale.
             self._publishers["trust"] = session.declare_publisher(
-                key(fleet, cid, "trust"), reliability=zenoh.Reliability.RELIABLE)
+                key(fleet, cid, "trust"), reliability=zenoh.Reliability.BEST_EFFORT, express=True,
+                congestion_control=zenoh.CongestionControl.DROP)
             self._publishers["pose"] = session.declare_publisher(
                 key(fleet, cid, "pose"), reliability=zenoh.Reliability.BEST_EFFORT, express=True,
                 congestion_control=zenoh.CongestionControl.DROP)

@@ -6,7 +6,7 @@ Keys (F the fleet, N the car id):
                                       a UDP link where there is one), and each new plan
                                       also reliably (AdvancedPublisher, cache of 1: late
                                       joiners get the latest at once)
-    trustfg/F/N/trust    TrustReport  reliable
+    trustfg/F/N/trust    TrustReport  best effort, express (each supersedes the last)
     trustfg/F/N/pose     Pose         best effort, express
     trustfg/F/N/status   Status       best effort
     trustfg/F/N/alive    liveliness token of car N's process
