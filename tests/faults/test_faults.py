@@ -56,7 +56,8 @@ def test_fault(name, tmp_path):
         # Issue 10's acceptance point, met since a plan held up in a stalled link counts as
         # lost (agent/evidence.py): 45 of 45 runs at 0.8 or above (`trustfg faults --cases
         # lossy-clock --seeds 8` four times, `--seeds 10` once, the whole matrix with
-        # `--seeds 3` once; least 0.823).
+        # `--seeds 3` once; least 0.823); since trust reports go best effort (stop 31),
+        # 0.886-0.948 in 7 runs (`--cases lossy-clock --seeds 4`, the matrix `--seeds 3`).
         assert row["trust_after_3s"] >= 0.8, row
     if name == "loss-50":
         assert row["plan_age_ms_p99"] <= PLAN_AGE_P99_MS, row
