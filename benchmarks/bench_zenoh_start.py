@@ -1,7 +1,7 @@
 """How often Zenoh peers that open their sessions at once lose a subscription or a
 liveliness token.
 
-    python benchmarks/bench_zenoh_start.py [--starts 50] [--peers 4] [--dial all|lower] [--watch] [--tcp-only]
+    python benchmarks/bench_zenoh_start.py [--starts 50] [--peers 4] [--dial all|lower] [--watch silent|behind] [--tcp-only]
 
 Bare Zenoh sessions, no trustfg code on the wire: each start opens ``--peers`` peer-mode
 sessions in their own OS processes on loopback (a TCP and a UDP ``?rel=0`` endpoint each,
@@ -11,11 +11,14 @@ recovery, as fleet.bus does) and ``status`` (plain), and for ``--seconds`` publi
 plan-sized sample on both plan paths and a status every 0.1 s. A start is *lost* when some
 peer heard nothing of some kind of some other peer in the last second.
 
-``--watch`` adds fleet.bus's rule (a kind silent for SILENT_S from a live peer is
-subscribed again; stop 18 measured it with the older rule that also asked the peer to be
-heard on another kind). Load the cores (e.g. two busy loops) to see it more often: on 2
-cores under load, Zenoh 1.10.2 lost a subscription in 4 of 76 starts dialling all, 1 of 76
-dialling lower; with a watch like this one (silence of 1 s there), 0 of 19.
+``--watch behind`` adds fleet.bus's rule (``fleet.bus.silent_kinds``: a kind silent for
+SILENT_S from a live peer, or a plan BEHIND_S behind the peer's status, is subscribed
+again, at most every RESUBSCRIBE_EVERY_S); ``--watch silent`` the rule without the second
+part, as it was before stop 31. Each start reports the longest a peer's plans went
+unheard after the first second ("plan silence"): a lost subscription shows there until it
+is mended. Load the cores (e.g. two busy loops) to see losses more often: on 2 cores
+under load, Zenoh 1.10.2 lost a subscription in 4 of 76 starts dialling all, 1 of 76
+dialling lower; with a watch (silence of 1 s there), 0 of 19.
 
 Each peer also declares a liveliness token (``<prefix>/<id>/alive``, as fleet.bus does)
 and a liveliness subscriber with history: a token *missed* is one some peer never saw by
@@ -35,7 +38,7 @@ import time
 import zenoh
 import zenoh.ext as zext
 
-from trustfg.fleet.bus import SILENT_S
+from trustfg.fleet.bus import FREQUENT, RESUBSCRIBE_EVERY_S, silent_kinds
 from trustfg.fleet.ports import free_port
 
 KINDS = ("plan", "status")
@@ -51,13 +54,21 @@ def config(listen: tuple[str, ...], connect: tuple[str, ...]) -> zenoh.Config:
     return c
 
 
-def peer(me: int, peers: int, listen, connect, prefix: str, seconds: float, watch: bool, out) -> None:
+def peer(me: int, peers: int, listen, connect, prefix: str, seconds: float, watch: str, out) -> None:
     session = zenoh.open(config(listen, connect))
     heard: dict[tuple[int, str], float] = {}
+    first: dict[int, float] = {}
+    silence: dict[int, float] = {}  # the longest gap between a peer's plans after the first second
+    started = time.monotonic()
 
     def on_sample(sample: zenoh.Sample) -> None:
         parts = str(sample.key_expr).split("/")
-        heard[(int(parts[1]), parts[2])] = time.monotonic()
+        sender, kind, now = int(parts[1]), parts[2], time.monotonic()
+        if kind == "plan":
+            since = max(heard.get((sender, kind), started), started + 1.0)
+            silence[sender] = max(silence.get(sender, 0.0), now - since)
+        heard[(sender, kind)] = now
+        first.setdefault(sender, now)
 
     def subscribe(kind: str):
         if kind == "plan":
@@ -79,26 +90,31 @@ def peer(me: int, peers: int, listen, connect, prefix: str, seconds: float, watc
         sample_miss_detection=zext.MissDetectionConfig(heartbeat=0.5), reliability=zenoh.Reliability.RELIABLE,
         congestion_control=zenoh.CongestionControl.DROP)
     status = session.declare_publisher(f"{prefix}/{me}/status", reliability=zenoh.Reliability.BEST_EFFORT)
-    payload, started, resubscribed = b"p" * 700, time.monotonic(), 0
+    payload, resubscribed, last_resubscribed = b"p" * 700, 0, {}
+    others = {j: True for j in range(1, peers + 1) if j != me}  # as if every token had come
+    frequent = FREQUENT if watch == "behind" else ()
     while (now := time.monotonic()) - started < seconds:
         best_effort.put(payload)
         reliable.put(payload)
         status.put(b"s")
-        if watch and now - started > SILENT_S:
-            for kind in KINDS:
-                others = [j for j in range(1, peers + 1) if j != me]  # every peer is up here
-                if any(now - heard.get((j, kind), started) > SILENT_S for j in others):
+        if watch:
+            for kind in silent_kinds(dict(heard), others, KINDS, now, started, dict(first), frequent):
+                if now - last_resubscribed.get(kind, -1e9) >= RESUBSCRIBE_EVERY_S:
+                    last_resubscribed[kind] = now
                     subscribers[kind].undeclare()
                     subscribers[kind] = subscribe(kind)
                     resubscribed += 1
         time.sleep(0.1)
     end = time.monotonic()
+    for j in others:  # a peer never heard again: silent until the end
+        since = max(heard.get((j, "plan"), started), started + 1.0)
+        silence[j] = max(silence.get(j, 0.0), end - since)
     lost = [(j, kind) for j in range(1, peers + 1) if j != me for kind in KINDS if heard.get((j, kind), 0.0) < end - 1.0]
     missed = [j for j in range(1, peers + 1) if j != me and j not in tokens]
     alive.undeclare()
     token.undeclare()
     session.close()
-    out.put((me, lost, resubscribed, missed))
+    out.put((me, lost, resubscribed, missed, max(silence.values(), default=0.0)))
 
 
 def main() -> None:
@@ -107,10 +123,13 @@ def main() -> None:
     parser.add_argument("--peers", type=int, default=4)
     parser.add_argument("--seconds", type=float, default=6.0)
     parser.add_argument("--dial", choices=("all", "lower"), default="all")
-    parser.add_argument("--watch", action="store_true", help="subscribe again to a kind gone silent (fleet.bus's rule)")
+    parser.add_argument("--watch", choices=("silent", "behind"), default=None,
+                        help="subscribe again to a kind gone silent: fleet.bus's rule ('behind'), or without "
+                             "its plans-behind part ('silent')")
     parser.add_argument("--tcp-only", action="store_true", help="no UDP endpoints: one TCP link per pair")
     args = parser.parse_args()
     lost_starts = missed_starts = 0
+    silences: list[float] = []
     for start in range(args.starts):
         endpoints = {i: (f"tcp/127.0.0.1:{free_port()}",) + (
             () if args.tcp_only else (f"udp/127.0.0.1:{free_port(socket.SOCK_DGRAM)}?rel=0",))
@@ -126,14 +145,19 @@ def main() -> None:
         results = [out.get(timeout=60 + args.seconds) for _ in processes]
         for process in processes:
             process.join()
-        lost = [(me, j, kind) for me, pairs, _, _ in results for j, kind in pairs]
-        missed = [(me, j) for me, _, _, tokens in results for j in tokens]
+        lost = [(me, j, kind) for me, pairs, _, _, _ in results for j, kind in pairs]
+        missed = [(me, j) for me, _, _, tokens, _ in results for j in tokens]
+        silence = max(r[4] for r in results)
+        silences.append(silence)
         lost_starts += bool(lost)
         missed_starts += bool(missed)
-        print(f"start {start}: {'LOST ' + str(lost) if lost else 'ok'}, resubscribed {sum(r for _, _, r, _ in results)}"
-              f"{', tokens MISSED (seer, owner) ' + str(missed) if missed else ''}", flush=True)
+        print(f"start {start}: {'LOST ' + str(lost) if lost else 'ok'}, resubscribed {sum(r[2] for r in results)}, "
+              f"plan silence {silence:.2f} s{', tokens MISSED (seer, owner) ' + str(missed) if missed else ''}",
+              flush=True)
+    long = sum(s > 0.5 for s in silences)
     print(f"{lost_starts} of {args.starts} starts lost a subscription, {missed_starts} missed a liveliness token "
-          f"(dial {args.dial}, watch {args.watch}, {'TCP only' if args.tcp_only else 'TCP and UDP'})")
+          f"(dial {args.dial}, watch {args.watch or 'off'}, {'TCP only' if args.tcp_only else 'TCP and UDP'}); "
+          f"plans silent for over 0.5 s after the first second in {long} starts, longest {max(silences):.2f} s")
 
 
 if __name__ == "__main__":

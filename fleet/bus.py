@@ -98,10 +98,11 @@ def present(alive: dict[int, bool], heard: dict[tuple[int, str], float], now: fl
 
 
 def silent_kinds(heard: dict[tuple[int, str], float], alive: dict[int, bool], kinds: tuple[str, ...],
-                 now: float, opened: float, first: dict[int, float] | None = None) -> dict[str, list[int]]:
+                 now: float, opened: float, first: dict[int, float] | None = None,
+                 frequent: tuple[str, ...] = FREQUENT) -> dict[str, list[int]]:
     """Per kind, the cars whose liveliness token is up but that were not heard on it for
     SILENT_S (counted from the session's opening for a car never heard on it), or -- a
-    FREQUENT kind -- that were heard on another kind BEHIND_S after they were last heard
+    ``frequent`` kind -- that were heard on another kind BEHIND_S after they were last heard
     on it (or, never heard on it, after ``first[car]``: when they were first heard at all;
     a car only starting has no plan to send for its first few tenths of a second)."""
     out: dict[str, list[int]] = {}
@@ -113,7 +114,7 @@ def silent_kinds(heard: dict[tuple[int, str], float], alive: dict[int, bool], ki
         for kind in kinds:
             last = max(heard.get((car, kind), -math.inf), opened)
             silent = now - opened >= SILENT_S and now - last > SILENT_S
-            behind = kind in FREQUENT and latest - max(last, first.get(car, -math.inf)) > BEHIND_S
+            behind = kind in frequent and latest - max(last, first.get(car, -math.inf)) > BEHIND_S
             if silent or behind:
                 out.setdefault(kind, []).append(car)
     return out

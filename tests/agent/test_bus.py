@@ -222,6 +222,7 @@ def test_a_frequent_kind_behind_the_cars_other_kinds_is_declared_again_sooner():
     first[4] = now - BEHIND_S - 0.3  # heard for longer, and still no plan
     assert silent_kinds(heard, alive, kinds, now, opened, first) == {"plan": [1, 4]}
     assert silent_kinds(heard, alive, kinds, now, opened) == {"plan": [1, 4]}  # first unknown: the opening
+    assert silent_kinds(heard, alive, kinds, now, opened, first, frequent=()) == {}  # SILENT_S's rule alone
 
 
 def test_a_car_whose_token_never_came_is_on_the_bus_while_it_is_heard():
