@@ -346,18 +346,23 @@ class FleetBus:
         if self.car_id is not None:
             alive[self.car_id] = False  # never watch ourselves
         self._watch_deafness(heard, alive, now)
-        for kind, cars in silent_kinds(heard, alive, self.kinds, now, self._opened, first).items():
+        silent = silent_kinds(heard, alive, self.kinds, now, self._opened, first)
+        for kind, cars in silent.items():
             if now - self._resubscribed.get(kind, -math.inf) < RESUBSCRIBE_EVERY_S:
                 continue
             self._resubscribed[kind] = now
             # Lost (heard on K before) is worth a warning; never heard since the session
-            # opened is most often a car still starting up.
+            # opened is most often a car still starting up. A car silent on every kind may
+            # have no link to us at all, which no redeclaration mends: say our links.
             lost = [car for car in cars if (car, kind) in heard]
             quiet_s = max(now - max(heard.get((car, kind), -math.inf), self._opened) for car in cars)
+            on_nothing = [car for car in cars if all(car in silent.get(k, ()) for k in self.kinds)]
             log.log(logging.WARNING if lost else logging.INFO,
-                    "%s: no %s from car%s %s for %.1f s, though %s token is up: subscribing to %s again",
+                    "%s: no %s from car%s %s for %.1f s, though %s token is up: subscribing to %s again%s",
                     self._me, kind, "s" if len(cars) > 1 else "",
-                    ", ".join(map(str, cars)), quiet_s, "their" if len(cars) > 1 else "its", kind)
+                    ", ".join(map(str, cars)), quiet_s, "their" if len(cars) > 1 else "its", kind,
+                    f" (car{'s' if len(on_nothing) > 1 else ''} {', '.join(map(str, on_nothing))} heard on "
+                    f"nothing; links: {self._links_said()})" if on_nothing else "")
             try:
                 self._subscribers[kind].undeclare()
             except Exception as exc:  # already gone: declare anew all the same
