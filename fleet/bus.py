@@ -512,6 +512,8 @@ class FleetBus:
             return
         up = sample.kind == zenoh.SampleKind.PUT
         with self._lock:
+            if up and self.alive.get(parsed[0]) is False:  # back, a new process: it starts its kinds anew
+                self._first_heard.pop(parsed[0], None)
             self.alive[parsed[0]] = up
         self.counters["liveliness_up" if up else "liveliness_down"] += 1
 
