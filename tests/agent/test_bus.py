@@ -15,7 +15,7 @@ from tests.conftest import wait_for
 from trustfg.agent import messages
 from trustfg.agent.config import BusConfig
 from trustfg.agent.gp import Plan
-from trustfg.fleet.bus import BusError, FleetBus, zenoh_config
+from trustfg.fleet.bus import BEHIND_S, BusError, FleetBus, zenoh_config
 from trustfg.fleet.keys import parse_key
 from trustfg.fleet.ports import free_port
 
@@ -342,6 +342,33 @@ def test_poses_lost_while_the_car_is_heard_come_back_within_seconds(monkeypatch)
         print(f"poses back after {back_after_s} s")
         assert back_after_s is not None
         assert one.counters["resubscribed_pose"] == 1 and one.counters["resubscribed_status"] == 0
+
+
+def test_a_restarted_car_is_not_taken_for_lost_plans_before_it_could_send_one(monkeypatch):
+    """Car 2's process goes (its token down) and a new one comes: its first trust reports
+    against the old process's last plan are no plans a second behind -- the new process
+    has sent none yet. Fails with the behind rule counting from the old process."""
+    import trustfg.fleet.bus as bus_module
+    monkeypatch.setattr(bus_module, "SILENT_S", math.inf)  # the behind rule alone
+    a = endpoint()
+    with FleetBus(BusConfig(listen=(a,)), FLEET, 1, kinds=("plan", "trust")) as one:
+        with FleetBus(BusConfig(listen=(endpoint(),), connect=(a,)), FLEET, 2) as two:
+            assert wait_for(lambda: one.alive.get(2))
+            assert wait_for(lambda: (two.publish("plan", b"plan"), two.publish("trust", b"trust"),
+                                     {r.kind for r in one.drain()} == {"plan", "trust"})[-1], 5.0)
+        assert wait_for(lambda: one.alive.get(2) is False, 10.0)
+        time.sleep(BEHIND_S)  # the old plan is older than BEHIND_S when the new process speaks
+        with FleetBus(BusConfig(listen=(endpoint(),), connect=(a,)), FLEET, 2) as again:
+            assert wait_for(lambda: one.alive.get(2), 5.0)
+            before = one.counters["received_trust"]
+            assert wait_for(lambda: (again.publish("trust", b"trust"),
+                                     one.counters["received_trust"] > before)[-1], 5.0)
+            heard_at = time.monotonic()  # within a poll of the new process's first report
+            while time.monotonic() < heard_at + 0.8 * BEHIND_S:  # trust reports only: a process starting
+                again.publish("trust", b"trust")
+                one.drain()  # the watch looks every WATCH_PERIOD_S
+                time.sleep(0.05)
+            assert one.counters["resubscribed_plan"] == 0
 
 
 def test_a_live_car_heard_on_nothing_has_every_kind_declared_again(monkeypatch):
