@@ -41,8 +41,11 @@ class _OneLineErrors(argparse.ArgumentParser):
 def command_parser(prog: str, doc: str | None, whole: bool = False, **kwargs) -> argparse.ArgumentParser:
     """An argument parser for ``trustfg COMMAND``: the description is the first paragraph
     of the command module's docstring (``whole``: all of it), never cut mid-sentence; the
-    help shows every default; a usage error is one line."""
+    help shows every default; a usage error is one line. An option is named whole:
+    argparse's abbreviations took ``trustfg faults --seed 40`` (there is no ``--seed``)
+    for ``--seeds 40`` and ran another matrix without a word."""
     description = (doc or "").strip() if whole else (doc or "").strip().split("\n\n")[0]
+    kwargs.setdefault("allow_abbrev", False)
     return _OneLineErrors(prog=prog, description=description, formatter_class=_HelpWithDefaults, **kwargs)
 
 

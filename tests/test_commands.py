@@ -64,3 +64,11 @@ def test_a_user_error_is_one_line_and_a_non_zero_exit(argv):
     assert done.returncode != 0, done.stderr
     assert len(lines) == 1 and "Traceback" not in done.stderr, done.stderr
     assert lines[0].startswith(f"trustfg {argv[0]}"), lines
+
+
+@pytest.mark.parametrize("name", list(COMMANDS))
+def test_an_option_is_named_whole(name, monkeypatch):
+    """`trustfg faults --seed 40` ran 40 runs: argparse took it for `--seeds`. Every
+    command refuses a shortened option."""
+    parser = parser_of(name, monkeypatch)
+    assert parser.allow_abbrev is False
