@@ -61,12 +61,16 @@ def peer(me: int, peers: int, listen, connect, prefix: str, seconds: float, watc
     silence: dict[int, float] = {}  # the longest gap between a peer's plans after the first second
     started = time.monotonic()
 
+    def note_silence(sender: int, now: float) -> None:
+        """How long the sender's plans have gone unheard at ``now`` (after the first second)."""
+        since = max(heard.get((sender, "plan"), started), started + 1.0)
+        silence[sender] = max(silence.get(sender, 0.0), now - since)
+
     def on_sample(sample: zenoh.Sample) -> None:
         parts = str(sample.key_expr).split("/")
         sender, kind, now = int(parts[1]), parts[2], time.monotonic()
         if kind == "plan":
-            since = max(heard.get((sender, kind), started), started + 1.0)
-            silence[sender] = max(silence.get(sender, 0.0), now - since)
+            note_silence(sender, now)
         heard[(sender, kind)] = now
         first.setdefault(sender, now)
 
@@ -106,9 +110,8 @@ def peer(me: int, peers: int, listen, connect, prefix: str, seconds: float, watc
                     resubscribed += 1
         time.sleep(0.1)
     end = time.monotonic()
-    for j in others:  # a peer never heard again: silent until the end
-        since = max(heard.get((j, "plan"), started), started + 1.0)
-        silence[j] = max(silence.get(j, 0.0), end - since)
+    for j in others:  # a peer not heard lately: silent until the end
+        note_silence(j, end)
     lost = [(j, kind) for j in range(1, peers + 1) if j != me for kind in KINDS if heard.get((j, kind), 0.0) < end - 1.0]
     missed = [j for j in range(1, peers + 1) if j != me and j not in tokens]
     alive.undeclare()

@@ -339,7 +339,7 @@ class FleetBus:
         if now < self._next_watch or self._session is None:
             return
         self._next_watch = now + WATCH_PERIOD_S
-        with self._lock:  # the callbacks' threads write both
+        with self._lock:  # the callbacks' threads write them
             heard, tokens, first = dict(self._heard), dict(self.alive), dict(self._first_heard)
         alive = present(tokens, heard, now)
         self.counters["peers_without_token"] = sum(1 for car in alive if car not in tokens)

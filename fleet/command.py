@@ -32,7 +32,13 @@ class _HelpWithDefaults(argparse.RawDescriptionHelpFormatter):
 
 
 class _OneLineErrors(argparse.ArgumentParser):
-    """A usage error is one line on stderr and exit status 2."""
+    """A usage error is one line on stderr and exit status 2. An option is named whole:
+    argparse's abbreviations took ``trustfg faults --seed 40`` (there is no ``--seed``)
+    for ``--seeds 40`` and ran another matrix without a word. (Subcommands' parsers are of
+    this class too, so they refuse abbreviations as well.)"""
+
+    def __init__(self, *args, allow_abbrev: bool = False, **kwargs):
+        super().__init__(*args, allow_abbrev=allow_abbrev, **kwargs)
 
     def error(self, message: str):
         self.exit(2, f"{self.prog}: {message} (see --help)\n")
@@ -41,11 +47,8 @@ class _OneLineErrors(argparse.ArgumentParser):
 def command_parser(prog: str, doc: str | None, whole: bool = False, **kwargs) -> argparse.ArgumentParser:
     """An argument parser for ``trustfg COMMAND``: the description is the first paragraph
     of the command module's docstring (``whole``: all of it), never cut mid-sentence; the
-    help shows every default; a usage error is one line. An option is named whole:
-    argparse's abbreviations took ``trustfg faults --seed 40`` (there is no ``--seed``)
-    for ``--seeds 40`` and ran another matrix without a word."""
+    help shows every default; a usage error is one line; an option is named whole."""
     description = (doc or "").strip() if whole else (doc or "").strip().split("\n\n")[0]
-    kwargs.setdefault("allow_abbrev", False)
     return _OneLineErrors(prog=prog, description=description, formatter_class=_HelpWithDefaults, **kwargs)
 
 

@@ -377,14 +377,13 @@ def _rotated_rect(centre: np.ndarray, w: float, h: float, angle: float) -> Obsta
 def main(argv: list[str] | None = None) -> int:
     parser = command_parser("trustfg scenario", __doc__)
     sub = parser.add_subparsers(dest="action", required=True)
-    gen = sub.add_parser("generate", help="make a scene from a seed", allow_abbrev=False)
+    gen = sub.add_parser("generate", help="make a scene from a seed")
     gen.add_argument("--kind", required=True, choices=list(KINDS))
     gen.add_argument("--cars", type=int, required=True, help="number of cars (2..64; some kinds hold fewer)")
     gen.add_argument("--seed", type=int, default=0, help="draws the scene (default 0)")
     gen.add_argument("--name", default="", help="the scene's name (default: KIND-CARS)")
     gen.add_argument("--out", type=Path, required=True, help="the TOML file to write")
-    check = sub.add_parser("check", help="check that starts and goals are clear of obstacles and each other",
-                           allow_abbrev=False)
+    check = sub.add_parser("check", help="check that starts and goals are clear of obstacles and each other")
     check.add_argument("scenes", nargs="+", help="scenario files or shipped scene names")
     args = parser.parse_args(argv)
     if args.action == "generate":

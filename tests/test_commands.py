@@ -56,6 +56,8 @@ def test_help_shows_every_default_and_a_whole_description(name, monkeypatch):
     ["dashboard", "--config", "intersection", "--port", "1", "--host", "192.0.2.1"],
     ["dashboard", "--config", "deploy/lab/fleet-secure.toml", "--operator", "--host", "0.0.0.0"],
     ["sim", "--deadman", "-1"],
+    ["faults", "--seed", "3"],  # no --seed: not taken for --seeds
+    ["scenario", "generate", "--kind", "circle", "--car", "4", "--out", "x.toml"],  # a subcommand's too
     ["secure-config", "--fleet", "x", "--cars", "1", "--certs", "nowhere", "--identity", "car2", "--out", "x"],
 ])
 def test_a_user_error_is_one_line_and_a_non_zero_exit(argv):
