@@ -56,8 +56,6 @@ def test_help_shows_every_default_and_a_whole_description(name, monkeypatch):
     ["dashboard", "--config", "intersection", "--port", "1", "--host", "192.0.2.1"],
     ["dashboard", "--config", "deploy/lab/fleet-secure.toml", "--operator", "--host", "0.0.0.0"],
     ["sim", "--deadman", "-1"],
-    ["faults", "--seed", "3"],  # no --seed: not taken for --seeds
-    ["scenario", "generate", "--kind", "circle", "--car", "4", "--out", "x.toml"],  # a subcommand's too
     ["secure-config", "--fleet", "x", "--cars", "1", "--certs", "nowhere", "--identity", "car2", "--out", "x"],
 ])
 def test_a_user_error_is_one_line_and_a_non_zero_exit(argv):
@@ -74,3 +72,15 @@ def test_an_option_is_named_whole(name, monkeypatch):
     command refuses a shortened option."""
     parser = parser_of(name, monkeypatch)
     assert parser.allow_abbrev is False
+
+
+@pytest.mark.parametrize("argv", [["faults", "--seed", "3"], ["scenario", "generate", "--kind", "circle", "--car", "4",
+                                                               "--out", "x.toml"]])
+def test_a_shortened_option_is_a_usage_error_and_runs_nothing(argv, monkeypatch):
+    """Parsed only (never run: a regression must not start a fault matrix), a subcommand's
+    parser included."""
+    real = argparse.ArgumentParser.parse_args
+    parser = parser_of(argv[0], monkeypatch)
+    with pytest.raises(SystemExit) as exit_:
+        real(parser, argv[1:])
+    assert exit_.value.code == 2
