@@ -7,7 +7,8 @@ Cases (t = seconds after the start; car 2 is the victim where one car suffers):
 
     baseline       no fault
     loss-10/30/50  that % of every packet into every car's namespace dropped (nftables)
-    delay-50ms     every Zenoh link through a relay holding each chunk 50 +- 20 ms
+    delay-50ms     every Zenoh link (TCP and UDP) through a relay holding each chunk or
+                   datagram 50 +- 20 ms
     partition      car 2 cut off from the other cars for t = 4..7 s, then healed
     kill-restart   car 2's process SIGKILLed (once it drives, from t = 4 s), started again
                    2 s later; the fleet is configured to let a restarted car rejoin the
@@ -111,14 +112,17 @@ def _delay(setup: Setup) -> None:
     """Route every Zenoh link through a delaying relay; no gossip, so no short cuts."""
     relays = []
     for car in setup.fleet.cars:
-        host, port = car.listen[0][len("tcp/"):].rsplit(":", 1)
-        relay_host, relay_port = setup.lab.relay(host, int(port), 0.050, 0.020)
-        relays.append(f"tcp/{relay_host}:{relay_port}")
+        for endpoint in car.listen:  # its TCP link and its UDP one (best effort: plans, poses, trust)
+            protocol, rest = endpoint.split("/", 1)
+            address, _, metadata = rest.partition("?")
+            host, port = address.rsplit(":", 1)
+            relay_host, relay_port = setup.lab.relay(host, int(port), 0.050, 0.020, datagrams=protocol == "udp")
+            relays.append(f"{protocol}/{relay_host}:{relay_port}" + (f"?{metadata}" if metadata else ""))
     zenoh_file = Path(tempfile.mkdtemp(prefix="trustfg-delay-")) / "no-gossip.json5"
     zenoh_file.write_text('{ scouting: { gossip: { enabled: false } } }\n')
     setup.fleet = dataclasses.replace(setup.fleet, bus=dataclasses.replace(
         setup.fleet.bus, connect=tuple(relays), zenoh_config=str(zenoh_file),
-        max_links=1))  # one TCP link per pair, the relayed one
+        max_links=2))  # a TCP and a UDP link per pair, both relayed
 
 
 def _skewed_clock(setup: Setup) -> None:

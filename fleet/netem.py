@@ -9,8 +9,9 @@ is unknown"), so faults are made with what it has:
 * random loss is an nftables ``numgen random`` drop rule on the car namespace's input
   hook; a partition drops everything between one car and the other cars; a cut command
   link drops the car's UDP commands on their way out;
-* delay is a userspace TCP relay in the path of the Zenoh links: every chunk is held for a
-  random time (50 +- 20 ms by default) but never overtakes the one before it.
+* delay is a userspace relay in the path of each Zenoh link, TCP or UDP: every chunk or
+  datagram is held for a random time (50 +- 20 ms by default) but never overtakes the one
+  before it in its direction.
 
 Everything needs root (``ip netns``, nftables); :func:`available` says whether we have it.
 A :class:`Lab` is a context manager that removes every namespace, link, rule and relay
@@ -21,12 +22,15 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import heapq
 import logging
 import os
 import random
 import secrets
+import selectors
 import shutil
 import signal
+import socket
 import subprocess
 import threading
 import time
@@ -86,7 +90,7 @@ class Lab:
         self.bridge = f"tfg{self.tag}br"
         self.infra_ip = f"10.77.{self.subnet}.1"
         self.created: list[tuple[str, str]] = []
-        self.relays: list[DelayRelay] = []
+        self.relays: list[DelayRelay | DatagramRelay] = []
 
     def host(self, car_id: int) -> int:
         return (self.hosts or {}).get(car_id, car_id)
@@ -204,9 +208,12 @@ class Lab:
   }}
 }}""")
 
-    def relay(self, target_host: str, target_port: int, delay_s: float, jitter_s: float) -> tuple[str, int]:
-        """A delaying TCP relay in the root namespace in front of target; its address."""
-        relay = DelayRelay(self.infra_ip, (target_host, target_port), delay_s, jitter_s)
+    def relay(self, target_host: str, target_port: int, delay_s: float, jitter_s: float,
+              datagrams: bool = False) -> tuple[str, int]:
+        """A delaying relay (TCP, or UDP with ``datagrams``) in the root namespace in front
+        of target; its address."""
+        kind = DatagramRelay if datagrams else DelayRelay
+        relay = kind(self.infra_ip, (target_host, target_port), delay_s, jitter_s)
         relay.start()
         self.relays.append(relay)
         return relay.address
@@ -254,13 +261,16 @@ class DelayRelay:
             self._loop.close()
 
     async def _serve(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        try:
-            up_reader, up_writer = await asyncio.open_connection(*self.target)
-        except OSError:
-            writer.close()
-            return
-        await asyncio.gather(self._pump(reader, up_writer), self._pump(up_reader, writer),
-                             return_exceptions=True)
+        # Ends quietly when cancelled at close: asyncio (3.11) asks a connection's task for
+        # its exception once it is done, and a cancelled one answers with a traceback.
+        with contextlib.suppress(asyncio.CancelledError):
+            try:
+                up_reader, up_writer = await asyncio.open_connection(*self.target)
+            except OSError:
+                writer.close()
+                return
+            await asyncio.gather(self._pump(reader, up_writer), self._pump(up_reader, writer),
+                                 return_exceptions=True)
 
     async def _pump(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         queue: asyncio.Queue = asyncio.Queue()
@@ -293,5 +303,77 @@ class DelayRelay:
     def close(self) -> None:
         if self._loop is not None and self._loop.is_running():
             self._loop.call_soon_threadsafe(self._loop.stop)
+        if self._thread is not None:
+            self._thread.join(5)
+
+
+class DatagramRelay:
+    """A UDP relay that holds every datagram for delay +- jitter seconds, in order per
+    direction. Each client (source address) gets its own upstream socket, so the target
+    sees one peer per client, as it would without the relay."""
+
+    def __init__(self, host: str, target: tuple[str, int], delay_s: float, jitter_s: float, seed: int = 0):
+        self.target = target
+        self.delay_s = delay_s
+        self.jitter_s = jitter_s
+        self.rng = random.Random(seed)
+        self.front = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.front.bind((host, 0))
+        self.address: tuple[str, int] = self.front.getsockname()[:2]
+        self.upstream: dict[tuple, socket.socket] = {}
+        """client address -> the socket that speaks for it to the target"""
+        self.client_of: dict[socket.socket, tuple] = {}
+        self.due: list[tuple[float, int, socket.socket, bytes, tuple | None]] = []
+        """heap of (due, order, socket to send from, datagram, address or None = connected)"""
+        self.last_due: dict[tuple, float] = {}
+        self.datagrams = 0
+        self._order = 0
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def start(self) -> None:
+        self._thread = threading.Thread(target=self._run, name="datagram-relay", daemon=True)
+        self._thread.start()
+
+    def _hold(self, flow: tuple, send_from: socket.socket, data: bytes, to: tuple | None) -> None:
+        delay = max(0.0, self.rng.uniform(self.delay_s - self.jitter_s, self.delay_s + self.jitter_s))
+        due = max(self.last_due.get(flow, 0.0), time.monotonic() + delay)  # never overtake the one before
+        self.last_due[flow] = due
+        self._order += 1
+        self.datagrams += 1
+        heapq.heappush(self.due, (due, self._order, send_from, data, to))
+
+    def _run(self) -> None:
+        with selectors.DefaultSelector() as selector:
+            selector.register(self.front, selectors.EVENT_READ)
+            while not self._stop.is_set():
+                wait = 0.05 if not self.due else min(0.05, max(0.0, self.due[0][0] - time.monotonic()))
+                for key, _ in selector.select(wait):
+                    sock = key.fileobj
+                    try:
+                        data, source = sock.recvfrom(65536)
+                    except OSError:
+                        continue  # e.g. ICMP unreachable from the target: the datagram is lost
+                    if sock is self.front:
+                        up = self.upstream.get(source)
+                        if up is None:
+                            up = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+                            up.connect(self.target)
+                            self.upstream[source], self.client_of[up] = up, source
+                            selector.register(up, selectors.EVENT_READ)
+                        self._hold((source, "up"), up, data, None)
+                    else:
+                        client = self.client_of[sock]
+                        self._hold((client, "down"), self.front, data, client)
+                now = time.monotonic()
+                while self.due and self.due[0][0] <= now:
+                    _, _, send_from, data, to = heapq.heappop(self.due)
+                    with contextlib.suppress(OSError):  # a full buffer or unreachable target: lost, as UDP is
+                        send_from.sendto(data, to) if to is not None else send_from.send(data)
+        for sock in [self.front, *self.upstream.values()]:
+            sock.close()
+
+    def close(self) -> None:
+        self._stop.set()
         if self._thread is not None:
             self._thread.join(5)

@@ -1,4 +1,4 @@
-"""The delaying TCP relay of the fault suite (no root needed)."""
+"""The delaying TCP and UDP relays of the fault suite (no root needed)."""
 
 import socket
 import threading
@@ -6,7 +6,7 @@ import time
 
 import pytest
 
-from trustfg.fleet.netem import DelayRelay, Lab, available
+from trustfg.fleet.netem import DatagramRelay, DelayRelay, Lab, available
 
 
 @pytest.fixture
@@ -52,6 +52,57 @@ def test_relay_delays_each_way_in_order(echo_server):
         assert max(rtts) < 1.0  # and let them go (the upper bound is a sanity check, not a timing target)
     finally:
         relay.close()
+
+
+@pytest.fixture
+def udp_echo():
+    server = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    server.bind(("127.0.0.1", 0))
+    server.settimeout(0.2)
+    stop = threading.Event()
+    sources = set()
+
+    def serve():
+        while not stop.is_set():
+            try:
+                data, source = server.recvfrom(4096)
+            except TimeoutError:
+                continue
+            sources.add(source)
+            server.sendto(data, source)
+
+    thread = threading.Thread(target=serve, daemon=True)
+    thread.start()
+    yield server.getsockname(), sources
+    stop.set()
+    thread.join(2)
+    server.close()
+
+
+def test_datagram_relay_delays_each_way_in_order_one_source_per_client(udp_echo):
+    target, sources = udp_echo
+    relay = DatagramRelay("127.0.0.1", target, delay_s=0.05, jitter_s=0.02, seed=1)
+    relay.start()
+    clients = [socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in range(2)]
+    try:
+        for client in clients:
+            client.settimeout(2)
+        sent = time.monotonic()
+        for i in range(20):  # a burst: each datagram's delay is drawn anew, yet none overtakes
+            clients[0].sendto(b"%03d" % i, relay.address)
+        echoed = [clients[0].recvfrom(64) for _ in range(20)]
+        rtt = time.monotonic() - sent
+        assert [data for data, _ in echoed] == [b"%03d" % i for i in range(20)]
+        assert {source for _, source in echoed} == {relay.address}  # answers come from the relay
+        assert rtt >= 2 * 0.03 - 0.005  # both directions held at least 30 ms
+        clients[1].sendto(b"x", relay.address)
+        assert clients[1].recvfrom(64)[0] == b"x"
+        assert len(sources) == 2  # the target saw each client as its own peer
+    finally:
+        for client in clients:
+            client.close()
+        relay.close()
+    assert relay.front.fileno() == -1  # closed with the relay
 
 
 def test_lab_needs_root_or_says_why():
