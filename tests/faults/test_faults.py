@@ -53,11 +53,10 @@ def test_fault(name, tmp_path):
     assert row["honest_trust_min"] >= TRUST_FLOOR, row
     if name == "lossy-clock":  # an honest fleet under loss, delay and a skewed clock stays trusted
         assert row["trust_after_3s"] is not None, row
-        # Issue 10's acceptance point, met since a plan held up in a stalled link counts as
-        # lost (agent/evidence.py): 45 of 45 runs at 0.8 or above (`trustfg faults --cases
-        # lossy-clock --seeds 8` four times, `--seeds 10` once, the whole matrix with
-        # `--seeds 3` once; least 0.823); since trust reports go best effort (stop 31),
-        # 0.886-0.948 in 7 runs (`--cases lossy-clock --seeds 4`, the matrix `--seeds 3`).
+        # Issue 10's acceptance point. With the delay relayed on each car's TCP link only (no
+        # UDP link, unlike every other case), 5 of 41 runs fell below (0.739-0.797, CI's
+        # among them: links stalled for seconds); with its UDP link relayed too (stop 32),
+        # 24 of 24 at 0.931-0.948 (`trustfg faults --cases lossy-clock --seeds 8`, 3 times).
         assert row["trust_after_3s"] >= 0.8, row
     if name == "loss-50":
         assert row["plan_age_ms_p99"] <= PLAN_AGE_P99_MS, row
