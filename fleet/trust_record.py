@@ -7,10 +7,15 @@ here: each car's latest report about a peer holds until its next.
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
 import numpy as np
 
 from ..agent import metrics
+from ..agent.audit import first_false_claim
 from ..agent.config import Scenario
+from ..agent.gp import Plan
 
 TRUST_SETTLE_S = 3.0
 """Honest trust is judged from this long after the start: before, evidence is still coming in."""
@@ -50,3 +55,33 @@ def clock_offsets(stats: dict[int, dict | None], ids: list[int]) -> dict[str, fl
     seen = {i: [s["clock_offsets_s"][str(i)] for s in stats.values()
                 if s and str(i) in s.get("clock_offsets_s", {})] for i in ids}
     return {str(i): round(float(np.median(v)) * 1e3, 1) for i, v in seen.items() if v}
+
+
+def first_lie_due(scenario: Scenario, messages_path: Path, times: np.ndarray, states: np.ndarray,
+                  t_go: float) -> float | None:
+    """When a liar's claim first put it beyond the audit's tolerance from where it truly
+    was (s after the go): the earliest moment the lie could have been caught
+    (agent.audit.first_false_claim, on every plan the liars published as the observer
+    heard them, against mocap-sim's ground truth). A liar standing still has nothing its
+    attack can bend, so its departure is no start for detection. None: no lie came due."""
+    ids = [c.id for c in scenario.cars]
+    told: dict[int, list[tuple[float, Plan, bool]]] = {car: [] for car in scenario.liars}
+    with open(messages_path) as f:
+        for line in f:
+            if '"plan"' not in line:
+                continue
+            record = json.loads(line)
+            message = record.get("message", {})
+            if record.get("kind") == "plan" and message.get("id") in told:
+                plan = Plan(message["t0"], message["dt"], np.array(message["positions"]),
+                            np.array(message["velocities"]))
+                told[message["id"]].append((message["stamp"], plan, True))  # judged by the truth alone
+    due = []
+    for car, plans in told.items():
+        xy = states[:, ids.index(car), :2]
+        truth_at = (lambda xy: lambda t: np.stack([np.interp(t, times, xy[:, 0]),
+                                                   np.interp(t, times, xy[:, 1])], axis=1))(xy)
+        first = first_false_claim(sorted(plans, key=lambda told: told[0]), truth_at, scenario.trust)
+        if first is not None:
+            due.append(first - t_go)
+    return round(min(due), 2) if due else None

@@ -8,7 +8,7 @@ import pytest
 
 from trustfg.agent.config import AttackConfig
 from trustfg.agent.scenario_files import load_scenario
-from trustfg.fleet.launch import START_LEAD_S, loopback_fleet, run
+from trustfg.fleet.launch import loopback_fleet, run
 
 SCENES = Path(__file__).resolve().parent.parent / "data" / "scenes"
 
@@ -60,17 +60,21 @@ def test_a_skewed_clock_is_seen_and_forgiven(honest):
 
 def test_honest_cars_distrust_a_liar_over_the_network(liar):
     """Every honest car trusts the liar 0.2 less than every honest peer within 3 s of its
-    departure (from the trust reports heard), and still less at the end. The end is not
-    held to the 0.2 gap: a liar parked at its goal tells no checkable lie, and forgetting
-    (0.85/s) wins back trust while the last car drives on (measured, seed 12: 0.50 when it
-    arrived at 15.4 s, 0.74 at 22.3 s)."""
+    first lie coming due (from the trust reports heard), and still less at the end. From
+    the lie, not the liar's departure: a liar standing still -- here, now and then, in a
+    deadlock just after it sets off -- has no motion to bend and tells no lie (measured: 1
+    run in 10 stood from 1.9 to 6 s, its first lie due at 6.15 s, detected at 8.52 s),
+    and one whose plan before the go bends its departure lies before it leaves (1 in 10:
+    due 0.72 s before the go, detected 0.45 s later).
+    The end is not held to the 0.2 gap: a liar parked at its goal tells no checkable lie,
+    and forgetting (0.85/s) wins back trust while the last car drives on (measured, seed
+    12: 0.50 when it arrived at 15.4 s, 0.74 at 22.3 s)."""
     out, summary = liar
     assert summary["crashed"] == [] and summary["breaches"] == []
     assert all(summary["reached_goal"])
-    start = next(json.loads(line)["message"] for line in open(out / "messages.jsonl")
-                 if '"kind": "start"' in line and '"message"' in line)
-    departs = start["cars"]["1"]["depart"] - (start["stamp"] + START_LEAD_S)  # after the go, as the summary
-    assert summary["trust_detected_at_s"] is not None and summary["trust_detected_at_s"] <= departs + 3.0, summary
+    due = summary["first_lie_due_s"]
+    assert due is not None, "the liar never told a lie beyond the audit's tolerance"
+    assert summary["trust_detected_at_s"] is not None and summary["trust_detected_at_s"] <= due + 3.0, summary
     ids = summary["car_ids"]
     trust = summary["trust"]
     liar_index = ids.index(1)
