@@ -377,3 +377,5 @@ class DatagramRelay:
         self._stop.set()
         if self._thread is not None:
             self._thread.join(5)
+        else:
+            self.front.close()  # never started: its thread did not get to close it

@@ -78,10 +78,13 @@ def first_lie_due(scenario: Scenario, messages_path: Path, times: np.ndarray, st
                 told[message["id"]].append((message["stamp"], plan, True))  # judged by the truth alone
     due = []
     for car, plans in told.items():
-        xy = states[:, ids.index(car), :2]
-        truth_at = (lambda xy: lambda t: np.stack([np.interp(t, times, xy[:, 0]),
-                                                   np.interp(t, times, xy[:, 1])], axis=1))(xy)
-        first = first_false_claim(sorted(plans, key=lambda told: told[0]), truth_at, scenario.trust)
+        first = first_false_claim(sorted(plans, key=lambda told: told[0]),
+                                  _positions_at(times, states[:, ids.index(car), :2]), scenario.trust)
         if first is not None:
             due.append(first - t_go)
     return round(min(due), 2) if due else None
+
+
+def _positions_at(times: np.ndarray, xy: np.ndarray):
+    """Where a car truly was at given times, linear between the recorded ones."""
+    return lambda t: np.stack([np.interp(t, times, xy[:, 0]), np.interp(t, times, xy[:, 1])], axis=1)
