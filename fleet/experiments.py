@@ -44,7 +44,7 @@ from .command import command_parser, configured
 from .fleet_sim import simulate
 from .pool import parallel
 from .runs import RunRecord, motion_summary, plan_outcomes, rounded
-from .trust_record import TRUST_GAP, TRUST_SETTLE_S
+from .trust_record import TRUST_GAP, TRUST_SETTLE_S, positions_at
 
 log = logging.getLogger(__name__)
 
@@ -173,8 +173,7 @@ def _sdf(world):
 
 def _truth(record: RunRecord, car: int):
     """Where car (index) ``car`` truly was at given times (linear between recorded steps)."""
-    times, xy = record.times, record.states[:, car, :2]
-    return lambda t: np.stack([np.interp(t, times, xy[:, 0]), np.interp(t, times, xy[:, 1])], axis=1)
+    return positions_at(record.times, record.states[:, car, :2])
 
 
 def run_one(scenario: Scenario, seed: int) -> tuple[dict, RunRecord]:

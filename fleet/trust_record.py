@@ -79,12 +79,12 @@ def first_lie_due(scenario: Scenario, messages_path: Path, times: np.ndarray, st
     due = []
     for car, plans in told.items():
         first = first_false_claim(sorted(plans, key=lambda told: told[0]),
-                                  _positions_at(times, states[:, ids.index(car), :2]), scenario.trust)
+                                  positions_at(times, states[:, ids.index(car), :2]), scenario.trust)
         if first is not None:
             due.append(first - t_go)
     return round(min(due), 2) if due else None
 
 
-def _positions_at(times: np.ndarray, xy: np.ndarray):
+def positions_at(times: np.ndarray, xy: np.ndarray):
     """Where a car truly was at given times, linear between the recorded ones."""
     return lambda t: np.stack([np.interp(t, times, xy[:, 0]), np.interp(t, times, xy[:, 1])], axis=1)
