@@ -63,7 +63,8 @@ could not flush for a quarter of its lease, and the dropped socket lingers in cl
 SO_LINGER of 10 s, compiled into Zenoh -- inside a receiving thread while unsent data
 waits. At 50 % loss two such closes at once left a car hearing nothing from any peer for
 2-10 s (gdb: both rx threads in close()). A blocked thread sleeps: more of them cost no
-CPU, and the others go on receiving."""
+CPU, and the others go on receiving. Upstream: eclipse-zenoh/zenoh#1101 (a dropped TCP
+link blocks its runtime thread for the linger; open, no setting for it in Zenoh 1.10)."""
 WATCH_PERIOD_S = 0.5
 SILENT_S = 3.0
 """With the control defaults a car publishes every kind at least every 0.5 s (status and
