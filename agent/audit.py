@@ -17,12 +17,18 @@ The tolerance grows with the lag because an honest car's future changes when it 
 (measured: up to 0.12-0.15 m at 1-2 s in the 4-car scenes, 0.34-0.50 m in the 8-car
 intersection); a lie of 0.6 m is twice the tolerance at 1 s.
 
-Evidence per plan (agent.trust): the check at lag 0 is one graded piece of transparency
-evidence, success or failure, as before. Later checks can only add failure, and at most
-one failure per plan in all (the worst graded miss so far, the increase recorded as soon
-as it appears): a plan that comes true earns no second success, and a plan that does not
-costs as much as a plan that lied at once. A check whose moment has no observation (the
-peer was not seen then) is skipped.
+Evidence per plan (agent.trust): the check at lag 0 is one piece of transparency
+evidence, a success within the tolerance and a whole failure beyond it: a car knows
+where it is, so its claim of the present misses only by the network's delay times its
+speed and the mocap's noise, and a claim beyond the tolerance is false, not imprecise
+(graded from 1x to 2x the tolerance, as the future's checks are, a replaying liar's
+claims 0.2-0.28 m off counted 0.4-0.9 of a failure, and it went unseparated from honest
+cars for 4 s). Later checks grade the miss (0 up to the tolerance, 1 from twice it,
+linear in between: an honest car's future moves when it replans), can only add failure,
+and at most one failure per plan in all (the worst graded miss so far, the increase
+recorded as soon as it appears): a plan that comes true earns no second success, and a
+plan that does not costs as much as a plan that lied at once. A check whose moment has
+no observation (the peer was not seen then) is skipped.
 
 Lost notices. A plan is held to its word only until ``audit_notice_s`` after the next
 plan's stamp. When plan messages of the peer were lost (a gap in its sequence numbers),
@@ -216,10 +222,11 @@ class Ledger:
                     self.unverifiable += first
                     continue  # not seen at that moment: nothing to compare
                 lag = t - claim.stamp
-                fail = graded_failure(miss, tolerance(lag, c))
-                if first and lag < 1e-9:
+                if first and lag < 1e-9:  # the present: beyond the tolerance it is false
+                    fail = float(miss > tolerance(0.0, c))
                     success, failure = 1.0 - fail, fail
                 else:
+                    fail = graded_failure(miss, tolerance(lag, c))
                     success, failure = 0.0, max(0.0, fail - claim.failure)
                 claim.failure = max(claim.failure, fail)
                 out.append(Check(claim, lag, miss, success, failure, rejected=miss > reject_threshold(lag, c)))

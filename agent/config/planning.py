@@ -107,8 +107,9 @@ class TrustConfig:
     prior_beta: float = 0.0
     """The Beta prior every peer starts from (tau = 2/3); forgetting decays towards it."""
     transparency_tolerance_m: float = 0.15
-    """A peer seen within this of where its latest plan says it is now: full success;
-    beyond twice this: full failure; linear in between."""
+    """A peer seen within this of where its plan says it is at the plan's stamp: a success;
+    beyond it: a failure (agent.audit; the plan's future is graded against a tolerance
+    that grows with the lag)."""
     plan_reject_m: float = 0.30
     """A shared plan that misses the peer's observed position by more than this is not
     planned against; the last plan that agreed (or the observed motion) is used."""
