@@ -135,6 +135,11 @@ def first_false_claim(told: list[tuple[float, Plan, bool]], truth_at, config: Tr
     return first
 
 
+def false_now(miss_m: float, tolerance_m: float) -> float:
+    """A claim of the present: 1 (a failure) beyond the tolerance, else 0."""
+    return float(miss_m > tolerance_m)
+
+
 def graded_failure(miss_m: float, tolerance_m: float) -> float:
     """0 up to the tolerance, 1 from twice the tolerance, linear in between."""
     return min(1.0, max(0.0, (miss_m - tolerance_m) / tolerance_m))
@@ -222,8 +227,8 @@ class Ledger:
                     self.unverifiable += first
                     continue  # not seen at that moment: nothing to compare
                 lag = t - claim.stamp
-                if first and lag < 1e-9:  # the present: beyond the tolerance it is false
-                    fail = float(miss > tolerance(0.0, c))
+                if first and lag < 1e-9:
+                    fail = false_now(miss, tolerance(0.0, c))
                     success, failure = 1.0 - fail, fail
                 else:
                     fail = graded_failure(miss, tolerance(lag, c))

@@ -10,7 +10,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from trustfg.agent import car_agent, clocks, evidence
+from trustfg.agent import audit, car_agent, clocks, evidence
 from trustfg.agent.attacks import Liar
 from trustfg.agent.car_agent import CarAgent
 from trustfg.agent.config import AttackConfig
@@ -222,3 +222,37 @@ def test_a_tailgated_car_is_not_blamed(intersection):
     assert evidence.safety_verdict(framer, [(victim, breach)], config) == (0.0, 1.0)
     anyone_close = dataclasses.replace(config, blame_closing_mps=-np.inf)  # the rule before: blame both
     assert evidence.safety_verdict(victim, [(framer, breach)], anyone_close) == (0.0, 1.0)
+
+
+
+# --- the present: a claim beyond the tolerance is false, not imprecise ------------------------------------
+
+
+def replays_at(path, speed: float, lies: tuple[float, ...]):
+    """Plans of a peer that replays, at the times ``lies``, its plan of 1 s before as new."""
+    def plans(t):
+        if any(abs(t - lie) < 1e-6 for lie in lies):
+            old = true_plan(path, speed, t - 1.0)
+            return Plan(t, old.dt, old.positions, old.velocities)
+        return true_plan(path, speed, t)
+    return plans
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_two_small_lies_separate_a_liar_and_pass_as_noise_when_graded(intersection, intersection_sdf, seed,
+                                                                      monkeypatch):
+    """A peer at 0.2 m/s replays its plan of 1 s ago twice (at 2.0 and 2.4 s): each claims
+    it is 0.2 m behind where it is -- beyond the 0.15 m tolerance, under the 0.3 m at which
+    a plan is refused (intersection seed 47's liar, in the adversary table). Whole failures
+    put it 0.2 below an honest peer at once; graded from 1x to 2x the tolerance (a third
+    of a failure each), it stays within 0.15 of one."""
+    path = straight(0.2)
+    def gap_max():
+        honest, liar = [], []
+        watch(intersection, intersection_sdf, seed, speed=0.2, each=lambda a, t, x: honest.append(transparency(a, t)))
+        watch(intersection, intersection_sdf, seed, speed=0.2, plans=replays_at(path, 0.2, (2.0, 2.4)),
+              each=lambda a, t, x: liar.append(transparency(a, t)))
+        return float(np.max(np.subtract(honest, liar)))
+    assert gap_max() >= 0.2
+    monkeypatch.setattr(audit, "false_now", audit.graded_failure)
+    assert gap_max() < 0.15
