@@ -19,16 +19,17 @@ intersection); a lie of 0.6 m is twice the tolerance at 1 s.
 
 Evidence per plan (agent.trust): the check at lag 0 is one piece of transparency
 evidence, a success within the tolerance and a whole failure beyond it: a car knows
-where it is, so its claim of the present misses only by the network's delay times its
-speed and the mocap's noise, and a claim beyond the tolerance is false, not imprecise
-(graded from 1x to 2x the tolerance, as the future's checks are, a replaying liar's
-claims 0.2-0.28 m off counted 0.4-0.9 of a failure, and it went unseparated from honest
-cars for 4 s). Later checks grade the miss (0 up to the tolerance, 1 from twice it,
-linear in between: an honest car's future moves when it replans), can only add failure,
-and at most one failure per plan in all (the worst graded miss so far, the increase
-recorded as soon as it appears): a plan that comes true earns no second success, and a
-plan that does not costs as much as a plan that lied at once. A check whose moment has
-no observation (the peer was not seen then) is skipped.
+where it is, so its claim of the present misses only by its pose's age and its clock's
+residual error times its speed, and the mocap's noise (the check reads where it was seen
+at the stamp, not when the plan arrived), and a claim beyond the tolerance is false, not
+imprecise (graded from 1x to 2x the tolerance, as the future's checks are, a replaying
+liar's claims 0.2-0.28 m off counted 0.4-0.9 of a failure, and it went unseparated from
+honest cars for 4 s). Later checks grade the miss (0 up to the tolerance, 1 from twice
+it, linear in between: an honest car's future moves when it replans), can only add
+failure, and at most one failure per plan in all (the worst graded miss so far, the
+increase recorded as soon as it appears): a plan that comes true earns no second
+success, and a plan that does not costs as much as a plan that lied at once. A check
+whose moment has no observation (the peer was not seen then) is skipped.
 
 Lost notices. A plan is held to its word only until ``audit_notice_s`` after the next
 plan's stamp. When plan messages of the peer were lost (a gap in its sequence numbers),
