@@ -62,8 +62,10 @@ def test_with_a_udp_endpoint_peers_get_a_best_effort_link_and_plans_arrive():
     a, a_udp = endpoint(), udp_endpoint()
     with FleetBus(BusConfig(listen=(a, a_udp)), FLEET, 1) as one, \
             FleetBus(BusConfig(listen=(endpoint(), udp_endpoint()), connect=(a, a_udp)), FLEET, 2) as two:
-        assert wait_for(lambda: one.alive.get(2) and two.alive.get(1))
-        assert wait_for(lambda: {reliable for *_, reliable in two.links()} == {True, False}, 5.0), two.links()
+        # Not their liveliness tokens: Zenoh 1.10 loses one between peers with UDP links in
+        # about 1 % of starts (fleet.bus.present; CI met it here once). The links and the
+        # plans are what this test is about.
+        assert wait_for(lambda: {reliable for *_, reliable in two.links()} == {True, False}, 10.0), two.links()
         assert any(src.startswith("udp/") and not reliable for src, _, reliable in two.links())
         plan = messages.encode(messages.PlanMessage(1, 7, time.time(), Plan(0.0, 0.5, np.zeros((3, 2)),
                                                                             np.zeros((3, 2))), (1.0, 1.0)))
