@@ -224,7 +224,6 @@ def test_a_tailgated_car_is_not_blamed(intersection):
     assert evidence.safety_verdict(victim, [(framer, breach)], anyone_close) == (0.0, 1.0)
 
 
-
 # --- the present: a claim beyond the tolerance is false, not imprecise ------------------------------------
 
 
