@@ -148,7 +148,8 @@ def plan_safely(request: PlanRequest, bounds: Bounds, planner: PlannerConfig, co
             result = None
         if result is not None:
             last = result
-            verdict = verify(result.plan, request.peers, bounds, sdf, config)
+            verdict = verify(result.plan, request.peers, bounds, sdf, config,
+                             start_speed=float(np.linalg.norm(request.velocity)))
             if verdict.ok:
                 outcome = FIRST if len(tried) == 1 else RETRY
                 return Outcome(result.plan, outcome, _timed(result, started), verdict, tuple(tried),

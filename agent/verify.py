@@ -23,7 +23,12 @@ limits are checked by their effect: a plan asking for more speed or along-track
 acceleration than the car has makes the car fall behind (or, braking, run ahead of) it;
 that lag, along the track, may not pass ``limit_lag_m`` (2 cm) over the near term (a
 brief spike of the soft start prior costs millimetres, a plan the car cannot follow
-costs decimetres). Turning is the tracking controller's (bridge.tracking) business.
+costs decimetres). The follower starts at the speed the car has where the plan starts
+(the replan's start state), not at the plan's: a plan that sets off at 0.6 m/s from a
+standstill -- the soft start prior gives way where a hinge presses hard, as between
+cars queued closer than a stranger's epsilon -- is one the car cannot drive (held-out
+intersection-8: honest cars lurched and told futures that did not come true, and their
+peers distrusted them). Turning is the tracking controller's (bridge.tracking) business.
 
 How strict. ``tol`` (VerifyConfig.tolerance, 0.25) is the share of the margin that
 epsilon keeps beyond the breach distance that a plan may eat: eps - d is room for tracking
@@ -125,9 +130,10 @@ def check_times(plan: Plan, peers: Sequence[PeerConstraint], sample_m: float,
 
 
 def verify(plan: Plan, peers: Sequence[PeerConstraint], bounds: Bounds, sdf: SignedDistanceField,
-           config: VerifyConfig, t_from: float | None = None) -> Verdict:
+           config: VerifyConfig, t_from: float | None = None, start_speed: float | None = None) -> Verdict:
     """Check ``plan`` against the walls, every peer plan it was made against (with that
-    peer's epsilon, at the same absolute times), and the vehicle's limits."""
+    peer's epsilon, at the same absolute times), and the vehicle's limits, driven from
+    ``start_speed`` (the speed the car has where the plan starts; default: the plan's own)."""
     if len(bounds.breach) != len(peers):
         raise ValueError(f"{len(peers)} peers but {len(bounds.breach)} breach distances")
     times = check_times(plan, peers, config.sample_m, t_from)
@@ -162,7 +168,8 @@ def verify(plan: Plan, peers: Sequence[PeerConstraint], bounds: Bounds, sdf: Sig
     # The vehicle's limits over the near term: speed, and the acceleration along the track.
     near = times <= times[0] + config.limits_horizon_s
     times, p, v = times[near], p[near], v[near]
-    lag, k = follower_lag(times, np.linalg.norm(v, axis=1), bounds.max_speed_mps, bounds.max_accel_mps2)
+    lag, k = follower_lag(times, np.linalg.norm(v, axis=1), bounds.max_speed_mps, bounds.max_accel_mps2,
+                          start_speed)
     if lag > config.limit_lag_m:
         conflicts.append(Conflict("limits", float(times[k]), lag - config.limit_lag_m, position=_xy(p[k])))
 
@@ -170,16 +177,18 @@ def verify(plan: Plan, peers: Sequence[PeerConstraint], bounds: Bounds, sdf: Sig
     return Verdict(not conflicts, tuple(conflicts), clearance, obstacle_clearance, samples)
 
 
-def follower_lag(times: np.ndarray, speed: np.ndarray, max_speed: float, max_accel: float) -> tuple[float, int]:
+def follower_lag(times: np.ndarray, speed: np.ndarray, max_speed: float, max_accel: float,
+                 start_speed: float | None = None) -> tuple[float, int]:
     """How far behind (or ahead of) a plan's speed profile a car falls that follows it as
     closely as its limits allow -- speed u <= max_speed, |du/dt| <= max_accel, starting at
-    the plan's speed -- and the sample where that is largest: max_t |int (s - u) dt|."""
+    ``start_speed`` (default the plan's) -- and the sample where that is largest:
+    max_t |int (s - u) dt|."""
     if len(times) < 2:
         return 0.0, 0
     step = float(times[1] - times[0])
     dv = max_accel * step
     u = np.empty_like(speed)
-    u[0] = min(speed[0], max_speed)
+    u[0] = min(speed[0] if start_speed is None else start_speed, max_speed)
     for k in range(1, len(speed)):
         u[k] = min(max_speed, u[k - 1] + min(max(speed[k] - u[k - 1], -dv), dv))
     lag = np.abs(np.cumsum(speed - u) * step)

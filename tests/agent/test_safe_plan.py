@@ -216,6 +216,24 @@ def test_a_plan_that_sets_off_too_fast_is_retimed_along_the_same_path(room, seed
     assert all(gone(paced, t) <= gone(plan, t) + 0.01 for t in plan.times())  # never ahead of the plan
 
 
+def test_a_plan_that_sets_off_while_the_car_stands_is_not_used(room, monkeypatch):
+    """The optimiser's start prior on velocity is soft: pressed by a hinge it returns a plan
+    moving at 0.5 m/s at its first instant for a car that stands. That plan is checked from
+    the car's speed, refused, and retimed to set off from rest."""
+    request = PlanRequest(t_now=0.0, position=np.array([-2.0, 0.0]), velocity=np.zeros(2),
+                          goal=np.array([2.0, 0.0]), t_arrive=8.0, epsilon_obstacle=SAFETY.epsilon_obstacle(R))
+    result = plan_trajectory(request, PLANNER, room)
+    times = result.plan.times()
+    flying = Plan(0.0, result.plan.dt, np.c_[-2.0 + 0.5 * times, np.zeros_like(times)],
+                  np.tile([0.5, 0.0], (len(times), 1)))  # 0.5 m/s from the first instant
+    monkeypatch.setattr("trustfg.agent.safe_plan.plan_trajectory",
+                        lambda *a, **k: dataclasses.replace(result, plan=flying))
+    outcome = plan_safely(request, bounds(0), PLANNER, CONFIG, room, None)
+    assert outcome.tried[:2] == ("cold", "retimed"), outcome.tried
+    assert outcome.outcome == RETRY
+    assert np.linalg.norm(outcome.plan.velocities[0]) < 0.05
+
+
 def test_a_plan_that_breaks_only_the_limits_is_retimed_first(room):
     outcome = plan_safely(standing_off_its_lane(0), bounds(0), PLANNER, CONFIG, room, None)
     assert outcome.outcome == RETRY and outcome.tried[1] == "retimed", outcome.tried

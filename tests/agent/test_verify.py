@@ -102,6 +102,17 @@ def test_a_plan_faster_than_the_car_fails_on_its_limits(room):
     assert not verdict.ok and verdict.conflicts[0].kind == "limits"
 
 
+def test_a_plan_that_sets_off_faster_than_the_car_moves_fails_on_its_limits(room):
+    """A plan at 0.5 m/s from its first instant is drivable by a car already at 0.5 m/s,
+    not by one standing there: the follower starts at the car's speed (held-out
+    intersection-8: queued cars' plans set off at 0.6 m/s from a standstill)."""
+    cruise = line((-2.0, 0.0), (2.0, 0.0), duration=8.0)  # 0.5 m/s from the start
+    assert verify(cruise, [], bounds(0), room, CONFIG).ok  # the plan's own speed: as before
+    assert verify(cruise, [], bounds(0), room, CONFIG, start_speed=0.5).ok
+    verdict = verify(cruise, [], bounds(0), room, CONFIG, start_speed=0.0)
+    assert not verdict.ok and verdict.conflicts[0].kind == "limits"
+
+
 def test_follower_lag_is_the_distance_lost_to_the_limits():
     times = np.linspace(0.0, 1.0, 101)
     assert follower_lag(times, np.full(101, 0.5), 0.8, 1.5)[0] == pytest.approx(0.0)
