@@ -30,8 +30,13 @@ How peers' plans are used (agent.evidence; docs/architecture.md, "Trust"):
   be believed for it has arrived -- so a plan held up in the network is not read as a
   car that failed to say what it did (loss and delay cost honest cars no trust). A
   window in which the proximity guard (agent.guard), fed the poses we see, would have
-  held the peer below its plan's speed is no evidence either way: every honest car's
-  guard slows it unannounced when another car or a wall comes close ahead. A failure in
+  held the peer below its plan's speed, or in which it faced further than
+  ``TrackingConfig.turn_first_deg`` from where its plan went (its tracker turns it on the
+  spot first: a start facing elsewhere, a plan that swerves from a standstill), holds it
+  only to going no faster than it said: every honest car's guard slows it unannounced
+  when another car or a wall comes close ahead, and its tracker turns before it drives.
+  Such windows still count (a car queued behind another for seconds is not left at the
+  prior), and a car that announces it waits and drives on fails them. A failure in
   a window in which a plan of the peer's that could have told the change was lost (a
   gap in its sequence numbers), came too late to use, or has not come yet (nothing
   heard stamped that late: a stalled link) is not recorded either (counted): an honest
@@ -226,7 +231,7 @@ class CarAgent:
             view = self.peers.get(peer)
             if view is not None:
                 view.velocities.append((motion.stamp, motion.velocity))
-                if self._guard_holds(peer, motion, motions, view):
+                if self._guard_holds(peer, motion, motions, view) or self._turns_first(motion, view):
                     view.held.append(motion.stamp)
                 mismatch = _acceleration_mismatch(view, self.scenario.control.replan_period_s + REPLAN_MARGIN_S,
                                                   now - config.stale_after_s)
@@ -248,6 +253,19 @@ class CarAgent:
         cap = speed_cap(*motion.position, motion.yaw, self.radius(peer), others, self.scenario.guard,
                         self.scenario.safety, self.sdf)
         return cap < announced - GUARD_SLACK_MPS
+
+    def _turns_first(self, motion, view: PeerView) -> bool:
+        """Does ``peer``, as we see it, face further than ``turn_first_deg`` from where the
+        plan it announced goes? Then its tracker (bridge.tracking) turns it on the spot
+        before it drives -- every honest car does that after a stop or a start facing
+        elsewhere, unannounced (the plans are a point's, the cars are not)."""
+        if view.accepted is None:
+            return False
+        announced = view.accepted.state_at(np.array([motion.stamp]))[1][0]
+        if np.linalg.norm(announced) < GUARD_SLACK_MPS:
+            return False
+        facing_off = math.remainder(math.atan2(announced[1], announced[0]) - motion.yaw, math.tau)
+        return abs(facing_off) > math.radians(self.scenario.tracking.turn_first_deg)
 
     # --- planning ---------------------------------------------------------------------------
 
@@ -512,23 +530,34 @@ def _acceleration_mismatch(view: PeerView, fresh_s: float, until: float) -> tupl
     if start is None:
         return None
     t_old, observed_old = start
-    if any(t_old <= held <= t for held in view.held):
-        return None  # its guard held it back: slower than announced, for safety's sake
     announced = max(((stamp, p) for stamp, p in view.history if stamp <= t_old), key=lambda sp: sp[0],
                     default=None)
     if announced is None or t_old - announced[0] > fresh_s:
         return None
-    mismatch = _mismatch(announced[1], t_old, observed_old, t, observed)
+    # Its guard held it back, or it turned on the spot first, as honest cars do: then it
+    # is held only to going no faster than it said.
+    held = any(t_old <= moment <= t for moment in view.held)
+    measure = _overspeed if held else _acceleration_change
+    mismatch = measure(announced[1], t_old, observed_old, t, observed)
     since = [(stamp, p) for stamp, p in view.history if t_old < stamp <= t - ANNOUNCED_MIN_S]
     if since:
         stamp, plan = max(since, key=lambda sp: sp[0])  # the latest made, whatever came first
         then = min(view.velocities, key=lambda tv: abs(tv[0] - stamp))
         if abs(then[0] - stamp) <= 0.5 * ANNOUNCED_MIN_S:
-            mismatch = min(mismatch, _mismatch(plan, then[0], then[1], t, observed))
+            mismatch = min(mismatch, measure(plan, then[0], then[1], t, observed))
     return mismatch, t_old, t
 
 
-def _mismatch(plan, t_old: float, observed_old: np.ndarray, t: float, observed: np.ndarray) -> float:
+def _acceleration_change(plan, t_old: float, observed_old: np.ndarray, t: float, observed: np.ndarray) -> float:
+    """|observed - announced change of velocity| / window, m/s^2."""
     v_then, v_now = plan.state_at(np.array([t_old, t]))[1]  # one interpolation for both ends
     change = (observed - observed_old) - (v_now - v_then)
     return float(np.linalg.norm(change)) / (t - t_old)
+
+
+def _overspeed(plan, t_old: float, observed_old: np.ndarray, t: float, observed: np.ndarray) -> float:
+    """How much faster than announced the car went by the window's end, per window
+    length (m/s^2, judged on the same tolerance): a car its guard held, or that turned
+    on the spot, is slower than its plan, and should be no faster."""
+    (v_now,) = plan.state_at(np.array([t]))[1]
+    return max(0.0, float(np.linalg.norm(observed) - np.linalg.norm(v_now))) / (t - t_old)

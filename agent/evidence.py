@@ -69,9 +69,10 @@ class PeerView:
     velocities: deque = field(default_factory=lambda: deque(maxlen=64))
     """(t, observed velocity) at evidence ticks."""
     held: deque = field(default_factory=lambda: deque(maxlen=64))
-    """Evidence ticks (t) at which the proximity guard, as we see the fleet, held the peer
-    below the speed its plan announced (agent.guard): what it did then is no evidence of
-    consistency either way."""
+    """Evidence ticks (t) at which, as we see the fleet, the peer could not drive its plan:
+    its proximity guard held it below the speed the plan announced (agent.guard), or it
+    faced too far from where the plan went and turned on the spot first (bridge.tracking):
+    what it did then is no evidence of consistency either way."""
     lost: deque = field(default_factory=lambda: deque(maxlen=32))
     """(earliest, latest) stamp (our clock) a plan of the peer's that we lost could have
     had, from gaps in its sequence numbers, or that came too late to use: a change of

@@ -15,7 +15,7 @@ the command is
 with theta_r = atan2(v_ref), v_r = |v_ref| and omega_r = (v_x a_y - v_y a_x) / |v_ref|^2
 from the plan's velocity and acceleration. When the plan stands still (v_r ~ 0), the car
 turns towards the reference point and creeps to it, or stops once within
-``goal_tolerance_m``; when it faces more than ``TURN_FIRST_RAD`` away from the plan's
+``goal_tolerance_m``; when it faces more than ``turn_first_deg`` away from the plan's
 direction, it turns on the spot first. Commands are clamped to the vehicle's limits; no reversing.
 """
 
@@ -29,8 +29,6 @@ from ..agent.config import TrackingConfig, VehicleConfig
 from ..agent.gp import Plan
 
 STANDSTILL_MPS = 0.02
-TURN_FIRST_RAD = math.radians(60.0)
-"""A car whose heading is further than this from the plan's direction turns on the spot."""
 
 
 def wrap(angle: float) -> float:
@@ -58,7 +56,7 @@ def track(plan: Plan, t: float, x: float, y: float, yaw: float, gains: TrackingC
     e_x = c * dx + s * dy
     e_y = -s * dx + c * dy
     e_theta = wrap(theta_ref - yaw)
-    if abs(e_theta) > TURN_FIRST_RAD:
+    if abs(e_theta) > math.radians(gains.turn_first_deg):
         # Facing away from where the plan goes (after a stop, say): turn on the spot first.
         # Kanayama's turn rate scales with the reference speed, so a car facing backwards
         # on a plan that sets off gently would hardly turn, and never catch up.

@@ -41,9 +41,12 @@ class TrackingConfig:
     """A car is at its goal (and at any resting point of its plan) when it sees itself
     this close; it then stops. The one goal tolerance of trustfg (Scenario.arrival_radius_m
     derives the judge's from it)."""
+    turn_first_deg: float = 60.0
+    """A car facing further than this from where its plan goes turns on the spot before it
+    drives (after a stop, say); its peers expect that of it (agent.car_agent, consistency)."""
 
     def validate(self, path: str) -> None:
-        for name in ("k_along", "k_cross", "k_heading", "goal_tolerance_m"):
+        for name in ("k_along", "k_cross", "k_heading", "goal_tolerance_m", "turn_first_deg"):
             positive(getattr(self, name), f"{path}.{name}")
 
 

@@ -45,10 +45,12 @@ def plan_of(state, s: float) -> Plan:
                 velocities=np.c_[vs, np.zeros(13)])
 
 
-def consistency_failures(intersection, intersection_sdf, seed, moves, intends, delivery, standing=None) -> float:
-    """Drive the peer as ``moves``; every 0.2 s it announces ``intends(s)``; ``delivery(s)``
-    says when that plan arrives (None: lost); ``standing``: (x, y) where a third car
-    stands, seen too. Returns the consistency failure mass."""
+def consistency_failures(intersection, intersection_sdf, seed, moves, intends, delivery, standing=None,
+                         yaw: float = 0.0, successes: list | None = None) -> float:
+    """Drive the peer as ``moves``, facing ``yaw``; every 0.2 s it announces ``intends(s)``;
+    ``delivery(s)`` says when that plan arrives (None: lost); ``standing``: (x, y) where a
+    third car stands, seen too. Returns the consistency failure mass (and appends the
+    success mass to ``successes``)."""
     no_forgetting = replace(intersection, trust=replace(intersection.trust, forgetting=1.0))
     agent = CarAgent(intersection.cars[0], no_forgetting, intersection_sdf)
     rng = np.random.default_rng(seed)
@@ -59,10 +61,12 @@ def consistency_failures(intersection, intersection_sdf, seed, moves, intends, d
             _, s = inbox.pop(0)
             agent.receive(PlanMessage(PEER, int(s * 5), s, intends(s), (5.0, 0.5)), t)
         x, _ = moves(t)
-        agent.observe(t, PEER, x + rng.normal(0, 0.003), 0.5 + rng.normal(0, 0.003), 0.0)
+        agent.observe(t, PEER, x + rng.normal(0, 0.003), 0.5 + rng.normal(0, 0.003), yaw)
         if standing is not None:
             agent.observe(t, PEER + 1, standing[0] + rng.normal(0, 0.003), standing[1] + rng.normal(0, 0.003), np.pi)
         agent.gather_evidence(t)
+    if successes is not None:
+        successes.append(float(agent.trust.direct[PEER].alpha[1] - intersection.trust.prior_alpha))
     return float(agent.trust.direct[PEER].beta[1] - intersection.trust.prior_beta)
 
 
@@ -150,6 +154,33 @@ def test_a_car_its_guard_slows_unannounced_is_not_inconsistent(intersection, int
     for_the_guard = consistency_failures(intersection, intersection_sdf, seed, state, announced_cruise, on_time, ahead)
     assert for_nothing >= 1.0
     assert for_the_guard <= 0.25
+
+
+def setting_off(s: float) -> Plan:
+    """A plan made at s by a car standing at x = 0: off along +x at once, to 0.5 m/s."""
+    times = s + 0.25 * np.arange(13)
+    tau = times - s
+    v = np.minimum(tau, 0.5)
+    x = np.where(tau < 0.5, 0.5 * tau**2, 0.125 + 0.5 * (tau - 0.5))
+    return Plan(t0=s, dt=0.25, positions=np.c_[x, np.full(13, 0.5)], velocities=np.c_[v, np.zeros(13)])
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_a_car_that_turns_on_the_spot_before_it_sets_off_is_not_inconsistent(intersection, intersection_sdf, seed):
+    """The peer stands at x = 0 and, every replan, announces it sets off along +x. Facing
+    +x and standing still it does not do what it says, and fails; facing the other way
+    (yaw pi) its tracker turns it on the spot first (TrackingConfig.turn_first_deg), as every
+    honest car's does, so it is held only to going no faster than it said: it passes, and
+    the windows still count as evidence (a car queued facing elsewhere is not left at the
+    prior). Without the rule the turning car fails like the first."""
+    stands = lambda t: (0.0, 0.0)  # noqa: E731
+    facing, turning = [], []
+    for_nothing = consistency_failures(intersection, intersection_sdf, seed, stands, setting_off, on_time,
+                                       successes=facing)
+    turns = consistency_failures(intersection, intersection_sdf, seed, stands, setting_off, on_time,
+                                 yaw=np.pi, successes=turning)
+    assert for_nothing >= 5.0
+    assert turns <= 0.25 and turning[0] >= 20.0
 
 
 @pytest.mark.parametrize("seed", SEEDS)
