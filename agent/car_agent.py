@@ -255,8 +255,8 @@ class CarAgent:
         return cap < announced - GUARD_SLACK_MPS
 
     def _turns_first(self, motion, view: PeerView) -> bool:
-        """Does ``peer``, as we see it, face further than ``turn_first_deg`` from where the
-        plan it announced goes? Then its tracker (bridge.tracking) turns it on the spot
+        """Does the peer seen in ``motion`` face further than ``turn_first_deg`` from where
+        the plan it announced goes? Then its tracker (bridge.tracking) turns it on the spot
         before it drives -- every honest car does that after a stop or a start facing
         elsewhere, unannounced (the plans are a point's, the cars are not)."""
         if view.accepted is None:

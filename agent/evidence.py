@@ -72,7 +72,7 @@ class PeerView:
     """Evidence ticks (t) at which, as we see the fleet, the peer could not drive its plan:
     its proximity guard held it below the speed the plan announced (agent.guard), or it
     faced too far from where the plan went and turned on the spot first (bridge.tracking):
-    what it did then is no evidence of consistency either way."""
+    then it is held only to going no faster than it said (agent.car_agent)."""
     lost: deque = field(default_factory=lambda: deque(maxlen=32))
     """(earliest, latest) stamp (our clock) a plan of the peer's that we lost could have
     had, from gaps in its sequence numbers, or that came too late to use: a change of
