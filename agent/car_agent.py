@@ -231,8 +231,10 @@ class CarAgent:
             view = self.peers.get(peer)
             if view is not None:
                 view.velocities.append((motion.stamp, motion.velocity))
-                if self._guard_holds(peer, motion, motions, view) or self._turns_first(motion, view):
-                    view.held.append(motion.stamp)
+                if view.accepted is not None:
+                    announced = view.accepted.state_at(np.array([motion.stamp]))[1][0]
+                    if self._guard_holds(peer, motion, motions, announced) or self._turns_first(motion, announced):
+                        view.held.append(motion.stamp)
                 mismatch = _acceleration_mismatch(view, self.scenario.control.replan_period_s + REPLAN_MARGIN_S,
                                                   now - config.stale_after_s)
                 if mismatch is not None:
@@ -242,30 +244,28 @@ class CarAgent:
                     else:
                         self.trust.record(peer, CONSISTENCY, s, f, now)
 
-    def _guard_holds(self, peer: int, motion, motions: dict, view: PeerView) -> bool:
+    def _guard_holds(self, peer: int, motion, motions: dict, announced: np.ndarray) -> bool:
         """Would the proximity guard (agent.guard), fed the poses we see, hold ``peer``
-        below the speed of the plan it announced? Then it is slower than it said for
-        safety's sake -- every honest car's guard does that, unannounced."""
-        if not self.scenario.guard.enabled or view.accepted is None:
+        below the speed of the plan it announced (``announced``: that plan's velocity
+        now)? Then it is slower than it said for safety's sake -- every honest car's guard
+        does that, unannounced."""
+        if not self.scenario.guard.enabled:
             return False
-        announced = float(np.linalg.norm(view.accepted.state_at(np.array([motion.stamp]))[1][0]))
         others = [(*m.position, m.yaw, self.radius(cid)) for cid, m in motions.items() if cid != peer]
         cap = speed_cap(*motion.position, motion.yaw, self.radius(peer), others, self.scenario.guard,
                         self.scenario.safety, self.sdf)
-        return cap < announced - GUARD_SLACK_MPS
+        return cap < float(np.linalg.norm(announced)) - GUARD_SLACK_MPS
 
-    def _turns_first(self, motion, view: PeerView) -> bool:
-        """Does the peer seen in ``motion`` face further than ``turn_first_deg`` from where
-        the plan it announced goes? Then its tracker (bridge.tracking) turns it on the spot
-        before it drives -- every honest car does that after a stop or a start facing
-        elsewhere, unannounced (the plans are a point's, the cars are not)."""
-        if view.accepted is None:
-            return False
-        announced = view.accepted.state_at(np.array([motion.stamp]))[1][0]
+    def _turns_first(self, motion, announced: np.ndarray) -> bool:
+        """Does the peer seen in ``motion`` face so far from where the plan it announced goes
+        (``announced``: that plan's velocity now) that its tracker (bridge.tracking,
+        TrackingConfig.turns_first) turns it on the spot before it drives? Every honest car
+        does that after a stop or a start facing elsewhere, unannounced (the plans are a
+        point's, the cars are not)."""
         if np.linalg.norm(announced) < GUARD_SLACK_MPS:
             return False
         facing_off = math.remainder(math.atan2(announced[1], announced[0]) - motion.yaw, math.tau)
-        return abs(facing_off) > math.radians(self.scenario.tracking.turn_first_deg)
+        return self.scenario.tracking.turns_first(facing_off)
 
     # --- planning ---------------------------------------------------------------------------
 

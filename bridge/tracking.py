@@ -56,7 +56,7 @@ def track(plan: Plan, t: float, x: float, y: float, yaw: float, gains: TrackingC
     e_x = c * dx + s * dy
     e_y = -s * dx + c * dy
     e_theta = wrap(theta_ref - yaw)
-    if abs(e_theta) > math.radians(gains.turn_first_deg):
+    if gains.turns_first(e_theta):
         # Facing away from where the plan goes (after a stop, say): turn on the spot first.
         # Kanayama's turn rate scales with the reference speed, so a car facing backwards
         # on a plan that sets off gently would hardly turn, and never catch up.

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import math
 import re
 from dataclasses import dataclass
 
@@ -44,6 +45,12 @@ class TrackingConfig:
     turn_first_deg: float = 60.0
     """A car facing further than this from where its plan goes turns on the spot before it
     drives (after a stop, say); its peers expect that of it (agent.car_agent, consistency)."""
+
+    def turns_first(self, heading_error_rad: float) -> bool:
+        """Does a car this far (wrapped to [-pi, pi]) from its plan's direction turn on the
+        spot before it drives? The tracker's rule (bridge.tracking), and what its peers
+        expect of it."""
+        return abs(heading_error_rad) > math.radians(self.turn_first_deg)
 
     def validate(self, path: str) -> None:
         for name in ("k_along", "k_cross", "k_heading", "goal_tolerance_m", "turn_first_deg"):

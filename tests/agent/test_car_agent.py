@@ -174,9 +174,8 @@ def test_a_car_that_turns_on_the_spot_before_it_sets_off_is_not_inconsistent(int
     the windows still count as evidence (a car queued facing elsewhere is not left at the
     prior). Without the rule the turning car fails like the first."""
     stands = lambda t: (0.0, 0.0)  # noqa: E731
-    facing, turning = [], []
-    for_nothing = consistency_failures(intersection, intersection_sdf, seed, stands, setting_off, on_time,
-                                       successes=facing)
+    turning: list = []
+    for_nothing = consistency_failures(intersection, intersection_sdf, seed, stands, setting_off, on_time)
     turns = consistency_failures(intersection, intersection_sdf, seed, stands, setting_off, on_time,
                                  yaw=np.pi, successes=turning)
     assert for_nothing >= 5.0
