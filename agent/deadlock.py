@@ -40,12 +40,17 @@ halting: every plan it sent over the window ends at a standstill short of its go
 a car creeping on its fallback's brake does (bottleneck-4 seed 4: 2.5 cm/s, more
 progress than ``progress_m``, and every plan refused) -- not at its goal, has no way to
 its goal -- no connected free space keeping the wall's epsilon from walls and eps_0
-from every parked car (agent.routes.connected) -- while it would have one were we not
-where we stand. It drives ``detour_m`` to the first side (straight away from
-the walled-in car, then turning by DETOUR_TURNS_DEG) from where the way is open, holds
-there until the peer is at its goal or has a way round our goal, at least ``yield_s`` and
-at most ASIDE_MAX_YIELDS of those, and drives back. Each counts one step aside
-(``deadlock_steps_aside``).
+from every car that stands (``_standing``: parked, waiting to depart, stuck, or stuck
+as the window saw it) -- while it would have one were we not where we stand. A car
+that stands but is not parked counts as a wall too: a road's dead end, a car parked
+across the road's one lane and a car stuck in the other -- two cars wall the third
+in, and neither the yielding rule (the stuck one has nowhere to give way to) nor a rule
+that counted parked cars alone would open it (a held-out T-junction, seed 8). It
+drives ``detour_m`` to the first side (straight away from the walled-in car, then
+turning by DETOUR_TURNS_DEG) from where the way is open, holds there until the peer is
+at its goal or has a way round our goal (the cars that stood, where they are now), at
+least ``yield_s`` and at most ASIDE_MAX_YIELDS of those, and drives back. Each counts
+one step aside (``deadlock_steps_aside``).
 
 Pure: the caller passes the time and what its car sees.
 """
@@ -106,6 +111,8 @@ class Detour:
     """... and the goal we stepped aside from."""
     latest: float = 0.0
     """... and the latest it ends."""
+    walls: tuple[int, ...] = ()
+    """... and the cars that stood (not parked) and walled it in with us."""
 
 
 @dataclass
@@ -164,20 +171,22 @@ class DeadlockWatch:
         if not self.config.enabled:
             return None
         position = np.asarray(position, float)
+        standing = self._standing(now, peers)
         for cid, peer in sorted(peers.items()):
             if peer.at_goal or peer.waiting or peer.stuck or peer.goal is None or not self.stuck(cid, now):
                 continue
-            parked = [(tuple(p.position), keep_clear) for other, p in peers.items() if other != cid and p.at_goal]
-            if connected(sdf, peer.position, peer.goal, wall_clear, [*parked, (tuple(position), keep_clear)]):
+            walls = [(tuple(peers[other].position), keep_clear) for other in standing if other != cid]
+            if connected(sdf, peer.position, peer.goal, wall_clear, [*walls, (tuple(position), keep_clear)]):
                 continue
-            if not connected(sdf, peer.position, peer.goal, wall_clear, parked):
+            if not connected(sdf, peer.position, peer.goal, wall_clear, walls):
                 continue  # walled in, but not by us alone
-            aside = _aside_goal(position, peer, parked, _everyone(peers), self.config.detour_m, keep_clear, sdf,
+            aside = _aside_goal(position, peer, walls, _everyone(peers), self.config.detour_m, keep_clear, sdf,
                                 wall_clear)
             if aside is None:
                 continue
+            stood = tuple(other for other in standing if other != cid and not peers[other].at_goal)
             self.detour = Detour(aside, now + self.config.yield_s, cid, np.array(position),
-                                 now + ASIDE_MAX_YIELDS * self.config.yield_s)
+                                 now + ASIDE_MAX_YIELDS * self.config.yield_s, stood)
             self.steps_aside += 1
             return aside
         return None
@@ -185,15 +194,22 @@ class DeadlockWatch:
     def _still_needed(self, now: float, peers: dict[int, PeerSeen], keep_clear: float, sdf: SignedDistanceField,
                       wall_clear: float) -> bool:
         """Whether a step aside holds on: its peer is not at its goal and, were we back
-        home, would have no way there (up to ``Detour.latest``)."""
+        home, would have no way there past the parked cars and the cars that walled it in
+        with us, where they are now (up to ``Detour.latest``)."""
         detour = self.detour
         if detour is None or detour.for_peer is None or now >= detour.latest:
             return False
         peer = peers.get(detour.for_peer)
         if peer is None or peer.at_goal or peer.goal is None:
             return False
-        parked = [(tuple(p.position), keep_clear) for cid, p in peers.items() if cid != detour.for_peer and p.at_goal]
-        return not connected(sdf, peer.position, peer.goal, wall_clear, [*parked, (tuple(detour.home), keep_clear)])
+        walls = [(tuple(p.position), keep_clear) for cid, p in peers.items()
+                 if cid != detour.for_peer and (p.at_goal or cid in detour.walls)]
+        return not connected(sdf, peer.position, peer.goal, wall_clear, [*walls, (tuple(detour.home), keep_clear)])
+
+    def _standing(self, now: float, peers: dict[int, PeerSeen]) -> list[int]:
+        """The peers that stand where they are, walls to the others: parked at their goals,
+        waiting to depart, stuck (as they say, or as the window saw them)."""
+        return [cid for cid, p in sorted(peers.items()) if p.at_goal or p.waiting or p.stuck or self.stuck(cid, now)]
 
     def _record(self, now: float, position: np.ndarray, goal: np.ndarray, peers: dict[int, PeerSeen]) -> None:
         self.history.append((now, {self.car_id: (np.asarray(position, float), np.asarray(goal, float), False)}

@@ -266,3 +266,29 @@ def test_a_peer_is_seen_stuck_exactly_when_its_latest_plan_says_so():
         view.latest = PlanMessage(2, 1, 1.19, standing(np.array([0.5, -0.4]), 1.19), (2.15, -0.4), stuck)
         seen = peers_seen({2: track}, {2: view}, own_id=3, now=1.2, arrival_radius_m=0.1)
         assert seen[2].stuck is stuck and not seen[2].at_goal
+
+
+def test_a_parked_car_steps_aside_for_a_peer_that_it_walls_in_with_a_car_that_stands(road):
+    """A road's dead end (a held-out T-junction, seed 8): car 4 parked in the north lane,
+    car 5 stuck beside it in the south lane on its way to the north lane's end, car 6
+    stuck at the south lane's end on its way west. Cars 4 and 6 together wall car 5 in;
+    counting parked cars alone, car 4 did not (car 5 would have a way), and car 6 has
+    nowhere to give way to. Car 4 steps aside along the road, and holds while car 6
+    stands."""
+    home = np.array([1.77, 0.28])
+    five = PeerSeen(np.array([1.76, -0.20]), goal=np.array([2.3, 0.275]))
+    six = PeerSeen(np.array([2.16, -0.36]), goal=np.array([-2.3, -0.275]))
+    walls = [(tuple(six.position), KEEP_CLEAR)]
+    assert connected(road, five.position, five.goal, WALL_CLEAR, [(tuple(home), KEEP_CLEAR)])  # 4 alone: a way
+    assert not connected(road, five.position, five.goal, WALL_CLEAR, [*walls, (tuple(home), KEEP_CLEAR)])
+    watch = DeadlockWatch(4, CONFIG)
+    asides = [watch.step_aside(t, home, home, {5: five, 6: six}, KEEP_CLEAR, road, WALL_CLEAR)
+              for t in np.arange(0.0, CONFIG.window_s + 1.0, STEP_S)]
+    aside = next(a for a in asides if a is not None)
+    assert watch.steps_aside == 1 and watch.detour.for_peer == 5
+    assert connected(road, five.position, five.goal, WALL_CLEAR, [*walls, (tuple(aside), KEEP_CLEAR)])
+    late = watch.detour.until + 1.0  # car 6 still stands where it did: we hold on
+    assert np.array_equal(watch.goal(late, aside, home, {5: five, 6: six}, True, KEEP_CLEAR, road, WALL_CLEAR),
+                          aside)
+    six_gone = {5: five, 6: dataclasses.replace(six, position=np.array([-1.0, -0.3]))}
+    assert watch.goal(late + STEP_S, aside, home, six_gone, True, KEEP_CLEAR, road, WALL_CLEAR) is None
