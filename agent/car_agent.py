@@ -458,11 +458,18 @@ class CarAgent:
 
     # --- outputs ----------------------------------------------------------------------------
 
-    def number_on_from(self, before: "CarAgent") -> None:
-        """Number our messages on from ``before``'s (a fresh mind in the same car process, for
-        a new trial): the peers' inboxes take a sequence that starts over only as a restarted
-        sender's, after 2 s of its messages dropped as replays."""
+    def carry_over(self, before: "CarAgent") -> None:
+        """Take over what ``before`` -- this car's mind in the last trial, or while it
+        waited for the go -- knows of the fleet: the poses it saw, its views of the peers
+        (their plans, clocks and audits) and its trust in them. A new trial gives the car a
+        new plan, not a new memory: the evidence gathered while the fleet waited for the
+        go counts (cars that start inside one another's widest epsilon, strangers still,
+        plan away from each other at the go), and a liar caught in one trial is no
+        stranger in the next. Our messages are numbered on from ``before``'s: the peers'
+        inboxes take a sequence that starts over only as a restarted sender's, after 2 s
+        of its messages dropped as replays."""
         self._seq = Counter(before._seq)
+        self.tracks, self.peers, self.trust = before.tracks, before.peers, before.trust
 
     def next_seq(self, kind: str) -> int:
         self._seq[kind] += 1

@@ -107,7 +107,6 @@ class CarProcess:
         self._natnet_problem = "connecting"
         self._waiting = WaitingLog(car.id)
         self._plan = None  # what the command loop follows
-        self._last_plans: dict[int, tuple[messages.PlanMessage, float]] = {}
         self._bodies = {c.body_id: c.id for c in scenario.cars}
         self._seq: Counter = Counter()
         self._alive: dict[int, bool] = {}
@@ -117,7 +116,8 @@ class CarProcess:
         self.laps = Laps(car, scenario.control.laps, scenario.control.lap_turn_s)
 
     def _new_agent(self) -> CarAgent:
-        """A fresh mind: a car starts every trial from what it sees, not from the last one."""
+        """A fresh mind: a car plans every trial anew (``CarAgent.carry_over`` keeps what it
+        knows of its peers)."""
         return CarAgent(car=self.car, scenario=self.scenario, sdf=self.sdf, depart_at=math.inf,
                         clock=time.thread_time)  # the replan budget is CPU time (VerifyConfig.budget_ms)
 
@@ -158,8 +158,6 @@ class CarProcess:
                 self._feed_command_loop(self.clock())  # an e-stop goes out now, not after the pass
         elif isinstance(message, (messages.PlanMessage, messages.TrustReport)):
             self.agent.receive(message, received.at)
-            if isinstance(message, messages.PlanMessage):
-                self._last_plans[message.sender] = (message, received.at)  # for the next trial's agent
 
     def _start(self, message: messages.StartMessage | None) -> None:
         """A start from the operator (None: ``control.start_timeout_s`` ran out)."""
@@ -177,10 +175,8 @@ class CarProcess:
         depart, cruise = self.operation.depart_at, self.operation.cruise_mps
         self._plan = None
         agent = self._new_agent()
-        agent.number_on_from(self.agent)
+        agent.carry_over(self.agent)  # a new plan, the same memory of the peers
         agent.set_departure(depart, cruise)
-        for plan, at in self._last_plans.values():  # what the peers intend, as last heard
-            agent.receive(plan, at)
         self.agent = agent
         self.laps = Laps(self.car, self.scenario.control.laps, self.scenario.control.lap_turn_s)
         self.stuck = False  # the command loop's motion watch starts afresh with the trial
