@@ -40,8 +40,8 @@ halting: every plan it sent over the window ends at a standstill short of its go
 a car creeping on its fallback's brake does (bottleneck-4 seed 4: 2.5 cm/s, more
 progress than ``progress_m``, and every plan refused) -- not at its goal, has no way to
 its goal -- no connected free space keeping the wall's epsilon from walls and eps_0
-from every car that stands (``_standing``: parked, waiting to depart, stuck, or stuck
-as the window saw it) -- while it would have one were we not where we stand. A car
+from every car that stands (parked, waiting to depart, stuck, or stuck as the window
+saw it) -- while it would have one were we not where we stand. A car
 that stands but is not parked counts as a wall too: a road's dead end, a car parked
 across the road's one lane and a car stuck in the other -- two cars wall the third
 in, and neither the yielding rule (the stuck one has nowhere to give way to) nor a rule
@@ -171,9 +171,12 @@ class DeadlockWatch:
         if not self.config.enabled:
             return None
         position = np.asarray(position, float)
-        standing = self._standing(now, peers)
+        stuck = {cid for cid in peers if self.stuck(cid, now)}  # once: each reads the whole window
+        # The peers that stand where they are, walls to the others: parked at their goals,
+        # waiting to depart, stuck (as they say, or as the window saw them).
+        standing = [cid for cid, p in sorted(peers.items()) if p.at_goal or p.waiting or p.stuck or cid in stuck]
         for cid, peer in sorted(peers.items()):
-            if peer.at_goal or peer.waiting or peer.stuck or peer.goal is None or not self.stuck(cid, now):
+            if peer.at_goal or peer.waiting or peer.stuck or peer.goal is None or cid not in stuck:
                 continue
             walls = [(tuple(peers[other].position), keep_clear) for other in standing if other != cid]
             if connected(sdf, peer.position, peer.goal, wall_clear, [*walls, (tuple(position), keep_clear)]):
@@ -206,10 +209,6 @@ class DeadlockWatch:
                  if cid != detour.for_peer and (p.at_goal or cid in detour.walls)]
         return not connected(sdf, peer.position, peer.goal, wall_clear, [*walls, (tuple(detour.home), keep_clear)])
 
-    def _standing(self, now: float, peers: dict[int, PeerSeen]) -> list[int]:
-        """The peers that stand where they are, walls to the others: parked at their goals,
-        waiting to depart, stuck (as they say, or as the window saw them)."""
-        return [cid for cid, p in sorted(peers.items()) if p.at_goal or p.waiting or p.stuck or self.stuck(cid, now)]
 
     def _record(self, now: float, position: np.ndarray, goal: np.ndarray, peers: dict[int, PeerSeen]) -> None:
         self.history.append((now, {self.car_id: (np.asarray(position, float), np.asarray(goal, float), False)}
