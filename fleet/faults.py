@@ -66,7 +66,7 @@ import numpy as np
 from ..agent.scenario_files import load_scenario
 from . import netem
 from .command import command_parser
-from .launch import START_LEAD_S, RunContext, free_port, loopback_fleet, run
+from .launch import RunContext, free_port, loopback_fleet, run
 
 SCENARIO = "intersection"
 VICTIM = 2
@@ -251,7 +251,7 @@ def run_case(case: Case, seed: int, out: Path) -> dict:
 
 def measure(case: Case, summary: dict, out: Path) -> dict:
     ids = summary["car_ids"]
-    t_go = _t_go(out)
+    t_go = summary.get("t_go")
     row = {
         "case": case.name, "breaches": len(summary["breaches"]),
         "goals": sum(summary["reached_goal"]), "cars": len(ids), "crashed": summary["crashed"],
@@ -320,15 +320,6 @@ def plan_age_percentiles(messages_path: Path, since: float | None) -> tuple[floa
     if not ages:
         return None, None
     return float(np.percentile(ages, 50)), float(np.percentile(ages, 99))
-
-
-def _t_go(out: Path) -> float | None:
-    """The go time of the run (the events' clock): when its start message was sent."""
-    with open(out / "messages.jsonl") as f:
-        for line in f:
-            if '"kind": "start"' in line and '"message"' in line:
-                return json.loads(line)["message"]["stamp"] + START_LEAD_S
-    return None
 
 
 def _time_to_stop(commands: Path, car: int, onset: float) -> float | None:

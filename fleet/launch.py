@@ -218,7 +218,9 @@ def run(scenario: Scenario, out: Path, seed: int = 0, timeout_s: float | None = 
                         missing = [i for i in ids if not (bus.alive.get(i) and i in recorder.status)]
                         raise RuntimeError(f"cars {missing} did not come up (crashed: {processes.crashed()})")
                     time.sleep(0.05)
-                t_go = time.time() + START_LEAD_S
+                # The go comes no sooner than sim.settle_s after the last car came up: strangers
+                # still, cars would plan around each other with the widest epsilon.
+                t_go = time.time() + max(START_LEAD_S, scenario.sim.settle_s)
                 operator.start(departures(scenario, seed, t_go), trial=1)
                 processes.cpu.sample(mark="go")
                 context = RunContext(scenario, out, processes, config_path, t_go, recorder)
@@ -260,6 +262,7 @@ def run(scenario: Scenario, out: Path, seed: int = 0, timeout_s: float | None = 
         processes.stop()
         summary = summarise(final_legs(scenario), out, recorder, t_go, crashed_early)
         summary["cpu"] = processes.cpu.summary("go", "first_arrival")
+        summary["t_go"] = t_go  # the go, on the clock of the messages' stamps (None: no go)
     finally:
         processes.stop()
     if context is not None and context.events:
