@@ -10,6 +10,10 @@ repeatable from its seed. A car with ``clock_offset_s`` reads every time off its
 clock, that much ahead of the fleet's: its observations, stamps, departure and plan
 tracking, as a car computer with a wrong clock would.
 
+The cars stand ``sim.settle_s`` at their starts before the go, as ``trustfg sim``'s do
+(standing plans published, poses seen, evidence gathered); the record of motion starts
+at the go (t = 0), the trust record with the wait.
+
 Per seed, each car draws a start delay in [0, start_delay_max_s], a cruise speed in
 cruise_speed_range_mps (:func:`draw_departures`, which ``trustfg sim`` uses too) and a
 replanning phase, so that starts are desynchronised and, with avoidance off, conflicting
@@ -26,6 +30,7 @@ import numpy as np
 from ..agent import messages
 from ..agent.car_agent import CarAgent
 from ..agent.config import Scenario, SimConfig
+from ..agent.gp import standing
 from ..agent.vehicle import VehicleState
 from ..agent.vehicle import step as vehicle_step
 from ..agent.world import SignedDistanceField, build_sdf
@@ -61,11 +66,18 @@ def simulate(scenario: Scenario, seed: int, sdf: SignedDistanceField | None = No
     phase = rng.uniform(0.0, control.replan_period_s, n)
     noise_rng = np.random.default_rng([seed, 7])
 
-    agents = [
-        CarAgent(car=c, scenario=scenario, sdf=sdf, depart_at=float(depart[i]),
-                 cruise_speed_mps=float(cruise[i]), rng=np.random.default_rng([seed, c.id]))
-        for i, c in enumerate(cars)
-    ]
+    def minds(departures) -> list[CarAgent]:
+        return [CarAgent(car=c, scenario=scenario, sdf=sdf, depart_at=float(departures[i]),
+                         cruise_speed_mps=float(cruise[i]), rng=np.random.default_rng([seed, c.id]))
+                for i, c in enumerate(cars)]
+
+    # The cars stand sim.settle_s before the go, as trustfg sim's do: minds that wait
+    # (depart_at = inf), each replaced at the go by one that drives and carries over what
+    # its predecessor learnt (CarAgent.carry_over, as the car process does at a start).
+    settle_steps = int(round(sim.settle_s / step_s))
+    agents = minds(np.full(n, math.inf) if settle_steps else depart)
+    first_lies: list[float | None] = [None] * n  # lies told while the fleet waited
+    told_waiting: list[list] = [[] for _ in cars]
     inboxes = [messages.Inbox() for _ in cars]
     vehicles = [VehicleState(c.start[0], c.start[1], c.start_heading) for c in cars]
 
@@ -78,12 +90,21 @@ def simulate(scenario: Scenario, seed: int, sdf: SignedDistanceField | None = No
     arrived: list[float | None] = [None] * n
     guard_limited = [0] * n
     plan_log: list = []
-    next_replan = phase.copy()
+    # Replans and reports keep their phase to the go through the wait.
+    next_replan = phase - math.ceil(sim.settle_s / control.replan_period_s) * control.replan_period_s
     next_report = rng.uniform(0.0, control.trust_report_period_s, n)
-    next_trust_record = 0.0
+    next_report -= math.ceil(sim.settle_s / control.trust_report_period_s) * control.trust_report_period_s
+    next_trust_record = -math.floor(sim.settle_s / RECORD_TRUST_PERIOD_S + 1e-9) * RECORD_TRUST_PERIOD_S
 
-    for k in range(steps):
+    for k in range(-settle_steps, steps):
         t = k * step_s
+        going = t >= -1e-9
+        if k == 0 and settle_steps:  # the go
+            waited, agents = agents, minds(depart)
+            for i, agent in enumerate(agents):
+                agent.carry_over(waited[i])
+                if waited[i].liar is not None:
+                    first_lies[i], told_waiting[i] = waited[i].liar.first_lie_at, list(waited[i].liar.told)
         # 1. Deliver due messages through each receiver's inbox (decode + order/replay filter).
         own = t + clock  # every car's own reading of the time
         for sender, receiver, payload in network.due(t):
@@ -102,7 +123,10 @@ def simulate(scenario: Scenario, seed: int, sdf: SignedDistanceField | None = No
             agent.gather_evidence(own[i])
             if t + 1e-9 >= next_replan[i]:
                 next_replan[i] += control.replan_period_s
-                agent.replan(own[i])
+                if going:
+                    agent.replan(own[i])
+                elif (motion := agent.tracks[ids[i]].motion()) is not None:
+                    agent.plan = standing(motion.position, own[i])  # waiting: as fleet.car_process
                 if keep_plans and agent.plan is not None:
                     plan_log.append((t, i, agent.plan))
                 outgoing = agent.plan_message(own[i])
@@ -111,13 +135,15 @@ def simulate(scenario: Scenario, seed: int, sdf: SignedDistanceField | None = No
             if t + 1e-9 >= next_report[i]:
                 next_report[i] += control.trust_report_period_s
                 network.publish(i, messages.encode(agent.trust_message(own[i])), t)
-        if record_trust and t + 1e-9 >= next_trust_record:
+        if record_trust and t + 1e-9 >= next_trust_record:  # trust from the start of the wait
             next_trust_record += RECORD_TRUST_PERIOD_S
             trust_times.append(t)
             tr, tp, ep = _trust_snapshot(agents, ids, own)
             trust_rows.append(tr)
             transparency_rows.append(tp)
             epsilon_rows.append(ep)
+        if not going:
+            continue  # the cars stand; their motion's record starts at the go
         # 4. Record, then control and move.
         times.append(t)
         states.append([[s.x, s.y, s.yaw, s.v, s.omega] for s in vehicles])
@@ -154,8 +180,9 @@ def simulate(scenario: Scenario, seed: int, sdf: SignedDistanceField | None = No
         final_plans=[(a.plan.positions.copy(), a.plan.velocities.copy()) if a.plan is not None else
                      (np.zeros((0, 2)), np.zeros((0, 2))) for a in agents],
         plan_log=plan_log,
-        first_lie_s=[a.liar.first_lie_at if a.liar else None for a in agents],
-        told=[list(a.liar.told) if a.liar else [] for a in agents],
+        first_lie_s=[first_lies[i] if first_lies[i] is not None else (a.liar.first_lie_at if a.liar else None)
+                     for i, a in enumerate(agents)],
+        told=[told_waiting[i] + list(a.liar.told) if a.liar else [] for i, a in enumerate(agents)],
     )
 
 
@@ -189,7 +216,7 @@ class Network:
         self.sim, self.n, self.rng = sim, n, rng
         self.queue: list[tuple[float, int, int, int, bytes]] = []  # (at, order, sender, receiver, payload)
         self.order = 0
-        self.last = np.zeros((n, n))  # latest delivery time per link
+        self.last = np.full((n, n), -np.inf)  # latest delivery time per link
         self.lost = [0] * n
         self.sent = [0] * n
 

@@ -183,11 +183,19 @@ class SimConfig:
     2 s, 30 of 40 seeds breach with avoidance off."""
     cruise_speed_range_mps: tuple[float, float] = (0.35, 0.45)
     """Each car's cruise speed is drawn from this range per seed."""
+    settle_s: float = 2.0
+    """Cars stand this long at their starts, seeing and hearing each other, before the
+    go: ``trustfg sim`` gives the go no sooner after the last car came up, and the
+    in-process fleet starts this long before its go. Strangers are planned around with
+    the widest epsilon (eps_0 x g_max at the prior's lower bound): cars that start closer
+    than that plan away from each other at the go and fail each other's consistency;
+    two seconds of standing plans seen to come true lift every peer of a fault-free fleet
+    to >= 0.8 by the go (a lab's operator gives it later still)."""
 
     def validate(self, path: str) -> None:
         positive(self.timeout_s, f"{path}.timeout_s")
         if (self.observation_noise_m < 0 or self.message_latency_s < 0 or self.message_jitter_s < 0
-                or self.start_delay_max_s < 0):
+                or self.start_delay_max_s < 0 or self.settle_s < 0):
             raise ConfigError(f"{path}: noise, latency, jitter and delay must be >= 0")
         if not 0.0 <= self.message_loss < 1.0:
             raise ConfigError(f"{path}.message_loss: must be within [0, 1)")

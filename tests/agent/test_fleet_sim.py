@@ -119,3 +119,20 @@ def test_the_fair_off_keeps_eps_0_from_every_peer_where_trust_starts_wider(inter
     on = simulate(EXPERIMENTS["proximity"].variants["on"](short), 3).epsilon[:, off_diagonal]
     assert np.allclose(fixed, eps_0)
     assert on[0].min() > 1.2 * eps_0  # trust starts at the prior (2/3): a wider berth until it grows
+
+
+def test_cars_that_stand_before_the_go_are_strangers_no_more_at_the_go(lab):
+    """The fleet waits sim.settle_s at the starts, as trustfg sim's cars do: their standing
+    plans, heard and seen to come true, lift every peer off the prior before anyone moves.
+    Without the wait every peer is a stranger at the go (the prior, 2/3)."""
+    def at_the_go(settle_s, seed):
+        scene = dataclasses.replace(lab, sim=dataclasses.replace(lab.sim, settle_s=settle_s, timeout_s=0.1))
+        record = simulate(scene, seed)
+        assert record.trust_times[0] <= -settle_s + 0.1  # the trust record starts with the wait
+        trust = record.trust[int(np.argmin(np.abs(record.trust_times)))]
+        return trust[~np.eye(len(record.car_ids), dtype=bool)]
+
+    for seed in range(120, 124):
+        cold, settled = at_the_go(0.0, seed), at_the_go(2.0, seed)
+        assert cold.max() < 0.7, seed
+        assert settled.min() >= 0.8, seed
