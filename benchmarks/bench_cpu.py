@@ -4,9 +4,9 @@
 
 Runs ``trustfg sim`` (mocap-sim and one OS process per car on this machine, no dashboard)
 on each scene and reads every process's CPU from /proc (fleet.cpu: utime + stime of the
-process and all its threads, with its command loop: fleet.command_loop). Steady state is the window from the start message (every
-car plans against every peer from then on, including the ones still waiting to depart)
-to the first car's arrival (from then on the fleet thins out); a car's share of one
+process and all its threads, with its command loop: fleet.command_loop). Steady state is the window from the go (the
+start message's lead, ``sim.settle_s``, after it: every car plans against every peer from
+then on, including the ones still waiting to depart) to the first car's arrival (from then on the fleet thins out); a car's share of one
 core is its CPU time over that window divided by the window's wall time. Printed per
 scene: the mean, min and max over the car processes, and the sum over every process of
 the run (mocap-sim, the launcher and the cars) against the machine's cores -- near the

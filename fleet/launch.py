@@ -222,7 +222,6 @@ def run(scenario: Scenario, out: Path, seed: int = 0, timeout_s: float | None = 
                 # still, cars would plan around each other with the widest epsilon.
                 t_go = time.time() + max(START_LEAD_S, scenario.sim.settle_s)
                 operator.start(departures(scenario, seed, t_go), trial=1)
-                processes.cpu.sample(mark="go")
                 context = RunContext(scenario, out, processes, config_path, t_go, recorder)
                 print(f"trustfg sim: go (seed {seed}); recording to {out}", flush=True)
                 end = time.monotonic() + timeout_s
@@ -236,6 +235,8 @@ def run(scenario: Scenario, out: Path, seed: int = 0, timeout_s: float | None = 
                         if isinstance(again, (int, float)) and not isinstance(again, bool):
                             pending.append((time.time() - t_go + float(again), action))
                             pending.sort(key=lambda item: item[0])
+                    if "go" not in processes.cpu.marks and time.time() >= t_go:
+                        processes.cpu.sample(mark="go")  # the go itself: the wait before it plans nothing
                     arrived = [i for i in ids if recorder.status.get(i) and recorder.status[i].at_goal]
                     if arrived and "first_arrival" not in processes.cpu.marks:
                         processes.cpu.sample(mark="first_arrival")
