@@ -76,8 +76,7 @@ def simulate(scenario: Scenario, seed: int, sdf: SignedDistanceField | None = No
     # its predecessor learnt (CarAgent.carry_over, as the car process does at a start).
     settle_steps = int(round(sim.settle_s / step_s))
     agents = minds(np.full(n, math.inf) if settle_steps else depart)
-    first_lies: list[float | None] = [None] * n  # lies told while the fleet waited
-    told_waiting: list[list] = [[] for _ in cars]
+    waited: list[CarAgent] = []  # the minds that stood the wait (their liars' lies are the run's too)
     inboxes = [messages.Inbox() for _ in cars]
     vehicles = [VehicleState(c.start[0], c.start[1], c.start_heading) for c in cars]
 
@@ -103,8 +102,6 @@ def simulate(scenario: Scenario, seed: int, sdf: SignedDistanceField | None = No
             waited, agents = agents, minds(depart)
             for i, agent in enumerate(agents):
                 agent.carry_over(waited[i])
-                if waited[i].liar is not None:
-                    first_lies[i], told_waiting[i] = waited[i].liar.first_lie_at, list(waited[i].liar.told)
         # 1. Deliver due messages through each receiver's inbox (decode + order/replay filter).
         own = t + clock  # every car's own reading of the time
         for sender, receiver, payload in network.due(t):
@@ -160,6 +157,10 @@ def simulate(scenario: Scenario, seed: int, sdf: SignedDistanceField | None = No
         if all(a is not None for a in arrived) and all(abs(s.v) < 1e-3 for s in vehicles):
             break
 
+    def minds_of(i: int) -> list[CarAgent]:
+        """Car i's minds that lie, in order: the one that waited, the one that drove."""
+        return [mind for mind in (*waited[i:i + 1], agents[i]) if mind.liar is not None]
+
     return RunRecord(
         seed=seed,
         car_ids=ids,
@@ -180,10 +181,14 @@ def simulate(scenario: Scenario, seed: int, sdf: SignedDistanceField | None = No
         final_plans=[(a.plan.positions.copy(), a.plan.velocities.copy()) if a.plan is not None else
                      (np.zeros((0, 2)), np.zeros((0, 2))) for a in agents],
         plan_log=plan_log,
-        first_lie_s=[first_lies[i] if first_lies[i] is not None else (a.liar.first_lie_at if a.liar else None)
-                     for i, a in enumerate(agents)],
-        told=[told_waiting[i] + list(a.liar.told) if a.liar else [] for i, a in enumerate(agents)],
+        first_lie_s=[_first_lie(minds_of(i)) for i in range(n)],
+        told=[[told for mind in minds_of(i) for told in mind.liar.told] for i in range(n)],
     )
+
+
+def _first_lie(minds: list[CarAgent]) -> float | None:
+    """When the first of a car's lying minds first lied (None: never)."""
+    return next((mind.liar.first_lie_at for mind in minds if mind.liar.first_lie_at is not None), None)
 
 
 def _trust_snapshot(agents: list[CarAgent], ids: list[int], own: np.ndarray):
