@@ -156,8 +156,13 @@ def verify(plan: Plan, peers: Sequence[PeerConstraint], bounds: Bounds, sdf: Sig
     # Peers, eq. (9), at the same absolute times.
     clearance = math.inf
     for b, (peer, breach) in enumerate(zip(peers, bounds.breach)):
-        q = peer.plan.position_at(times)
-        rel = p - q
+        held = len(times)  # the peer held where its plan ends: for good, or for peer_hold_s
+        if config.peer_hold_s is not None:
+            held = int(np.searchsorted(times, peer.plan.t_end + config.peer_hold_s, side="right"))
+        if held == 0:
+            continue  # the whole plan lies past the peer's hold (VerifyConfig.peer_hold_s)
+        q = peer.plan.position_at(times[:held])
+        rel = p[:held] - q
         gap = np.linalg.norm(rel, axis=1) - _half_steps(rel)
         k = int(np.argmin(gap))
         clearance = min(clearance, float(gap[k] - breach))
