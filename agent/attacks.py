@@ -277,5 +277,5 @@ def _framing_steer(liar, params, request, peers, now, seen):
     liar.counters["framing_steers"] += 1
     steered = dataclasses.replace(request, goal=target, t_arrive=request.t_now + max(1.0, distance / FRAMING_SPEED_MPS),
                                   route=(), lane=())
-    return steered, [(peer, PeerConstraint(c.plan, min(c.epsilon, params.gap_m)) if peer == liar.victim else c)
+    return steered, [(peer, dataclasses.replace(c, epsilon=min(c.epsilon, params.gap_m)) if peer == liar.victim else c)
                      for peer, c in peers]

@@ -294,13 +294,31 @@ class CarAgent:
                 else:
                     self.counters["peers_unverified"] += 1  # not checked yet: not as if trusted
                     epsilon = widest
-                constraints.append((peer, PeerConstraint(plan, epsilon)))
+                constraints.append((peer, PeerConstraint(plan, epsilon, self._hold(peer))))
                 continue
             predicted = self._predict_from_observation(peer, now)
             if predicted is not None:
                 self.counters["peers_predicted"] += 1
-                constraints.append((peer, PeerConstraint(predicted, widest)))
+                constraints.append((peer, PeerConstraint(predicted, widest, self._hold(peer))))
         return constraints
+
+    def _hold(self, peer: int) -> float | None:
+        """How long verification holds ``peer`` where its plan ends (None: for good). For
+        good, but for a peer we swap places with -- it stands on our goal, and its goal is
+        our start, each within eps_0 -- when we go first (the lower id, the deadlock
+        watch's order): then for VerifyConfig.peer_hold_s (VerifyConfig.swap_first). Each
+        waiting for the other to leave, the two would wait for ever; the one that goes
+        first sets off, and the other, whose plan now meets a moving one, follows."""
+        if not self.scenario.verify.swap_first or peer < self.car.id:
+            return None
+        view, track = self.peers.get(peer), self.tracks.get(peer)
+        seen = track.motion() if track else None
+        if view is None or view.goal is None or seen is None:
+            return None
+        reach = self.epsilon_0(peer)
+        on_our_goal = float(np.linalg.norm(seen.position - np.asarray(self.car.goal, float))) <= reach
+        to_our_start = float(np.linalg.norm(np.asarray(view.goal, float) - np.asarray(self.car.start, float))) <= reach
+        return self.scenario.verify.peer_hold_s if on_our_goal and to_our_start else None
 
     def _predict_from_observation(self, peer: int, now: float) -> Plan | None:
         track = self.tracks.get(peer)

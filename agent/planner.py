@@ -51,6 +51,9 @@ class PeerConstraint:
 
     plan: Plan
     epsilon: float
+    hold_s: float | None = None
+    """How long past the end of its plan verification holds the peer where the plan
+    ends (None: for good; VerifyConfig.peer_hold_s)."""
 
 
 @dataclass(frozen=True)

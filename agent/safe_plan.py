@@ -72,7 +72,7 @@ import numpy as np
 from .config import PlannerConfig, VerifyConfig
 from .fallback import fallback
 from .gp import Plan
-from .planner import PeerConstraint, PlanningError, PlanRequest, PlanResult, plan_trajectory
+from .planner import PlanningError, PlanRequest, PlanResult, plan_trajectory
 from .retime import retime
 from .routes import NoRoute, path_length, plan_route
 from .verify import Bounds, Conflict, Verdict, verify
@@ -209,7 +209,7 @@ def tightened(request: PlanRequest, failed: Plan, conflicts: list[Conflict]) -> 
     """The request with every broken epsilon raised by TIGHTEN_PAD times how far it was
     broken, warm-started from the failed plan."""
     extra = {c.peer: c.excess for c in conflicts if c.kind == "peer"}
-    peers = tuple(PeerConstraint(p.plan, p.epsilon + TIGHTEN_PAD * extra[i]) if i in extra else p
+    peers = tuple(dataclasses.replace(p, epsilon=p.epsilon + TIGHTEN_PAD * extra[i]) if i in extra else p
                   for i, p in enumerate(request.peers))
     wall = max((c.excess for c in conflicts if c.kind == "obstacle"), default=0.0)
     return dataclasses.replace(request, peers=peers, warm_start=failed,

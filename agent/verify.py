@@ -156,9 +156,9 @@ def verify(plan: Plan, peers: Sequence[PeerConstraint], bounds: Bounds, sdf: Sig
     # Peers, eq. (9), at the same absolute times.
     clearance = math.inf
     for b, (peer, breach) in enumerate(zip(peers, bounds.breach)):
-        held = len(times)  # the peer held where its plan ends: for good, or for peer_hold_s
-        if config.peer_hold_s is not None:
-            held = int(np.searchsorted(times, peer.plan.t_end + config.peer_hold_s, side="right"))
+        held = len(times)  # the peer held where its plan ends: for good, or for its hold_s
+        if peer.hold_s is not None:
+            held = int(np.searchsorted(times, peer.plan.t_end + peer.hold_s, side="right"))
         if held == 0:
             continue  # the whole plan lies past the peer's hold (VerifyConfig.peer_hold_s)
         q = peer.plan.position_at(times[:held])

@@ -242,20 +242,21 @@ class VerifyConfig:
     fallback_decel_mps2: float = 1.0
     """Deceleration of the fallback's braking trajectory (below VehicleConfig's limit, so
     the car can follow it)."""
-    peer_hold_s: float | None = None
-    """How long past the end of a peer's plan the check holds the peer where that plan
-    ends (None, the default: for good). A plan that ends at its car's goal is renewed
-    while the car stands there (a parked car's standing plans always reach past now), so
-    a finite hold still holds it in effect; a plan that ends elsewhere -- a car waiting to
-    depart, a fallback, a prediction -- says nothing of where the car is later, and its
-    next plans will. Held for good, the car waiting on our goal fails every plan to it:
-    at the go of a ring swap each car's plan failed at its far end against the car
-    waiting on its goal, and the ring stood on its fallbacks for 2-4 s (circle-16 seed 0:
-    225 of its 309 fallbacks in the first 4 s). Measured with 3 s (longer than a car needs
-    to stop and replan), not adopted: circle-16 8 of 8 at every goal (seed 0 was a
-    timeout) and 17 % less flowtime, but bottleneck-4 18 of 20 (20 of 20 held for good):
-    the cars no longer wait for the car on their goal to leave before they make for the
-    door (README, "The scenario bank")."""
+    swap_first: bool = True
+    """Verification holds a peer where its plan ends for good (a parked car stays parked,
+    a car waiting on our goal is waited for), but for the peer we swap places with -- it
+    stands on our goal and its goal is our start (agent.car_agent) -- when we go first
+    (the lower id, the deadlock watch's order): that one only ``peer_hold_s`` past the
+    end of its plan. Each waiting for the other to leave, two such cars stand for good,
+    and a ring of them did: at the go of circle-16 every car's plan failed at its far end
+    against the car waiting on its goal, and the ring stood on its fallbacks for 2-4 s
+    (seed 0: 225 of its 309 fallbacks in the first 4 s). Off: every peer for good (as
+    before stop 37). A hold for every peer, not only the one we swap with, let the cars
+    of bottleneck-4 make for the door before the car on their goal had left (seeds 0-23:
+    22 of 24 at every goal, 24 of 24 held for good)."""
+    peer_hold_s: float = 3.0
+    """... how long: a car that replans five times a second and stops in 0.6 s from top
+    speed needs far less; the peer's next plans say where it is."""
     keep_s: float = 0.0
     """Keep the plan instead of optimising anew, for up to this long after it was
     optimised, while it still verifies from now against what the car knows now (peers'
@@ -273,9 +274,7 @@ class VerifyConfig:
             raise ConfigError(f"{path}.limit_lag_m: must be >= 0")
         if self.max_attempts < 1 or self.retry_iterations < 1:
             raise ConfigError(f"{path}.max_attempts/retry_iterations: must be >= 1")
-        if self.peer_hold_s is not None:
-            positive(self.peer_hold_s, f"{path}.peer_hold_s")
-        for name in ("sample_m", "limits_horizon_s", "budget_ms", "fallback_decel_mps2"):
+        for name in ("sample_m", "limits_horizon_s", "budget_ms", "fallback_decel_mps2", "peer_hold_s"):
             positive(getattr(self, name), f"{path}.{name}")
 
 

@@ -111,16 +111,18 @@ def test_a_clear_plan_verifies_first_try(room):
 
 def test_a_car_whose_goal_a_waiting_peer_stands_on_sets_off_with_a_finite_hold(room):
     """A ring swap at the go: the peer that starts on our goal waits there (its standing
-    plans end 2 s on). Held there for good (the default), it fails every plan to our goal
-    and we stand on the fallback, as every car of the ring does; held for
-    verify.peer_hold_s = 3 s, our plan is used -- we are 10 s from the goal, and the
-    peer's next plans say where it is then."""
-    request = PlanRequest(0.0, np.array([-2.0, 0.0]), np.zeros(2), np.array([2.0, 0.0]), 10.0,
-                          SAFETY.epsilon_obstacle(R), peers=(PeerConstraint(standing(np.array([2.0, 0.0]), 0.0), EPS),))
-    held = plan_safely(request, bounds(1), PLANNER, dataclasses.replace(CONFIG, peer_hold_s=3.0), room, None)
+    plans end 2 s on). Held there for good, it fails every plan to our goal and we stand
+    on the fallback, as every car of the ring did; held for 3 s (the car that goes first
+    of two that swap places, agent.car_agent), our plan is used -- we are 10 s from the
+    goal, and the peer's next plans say where it is then."""
+    def request(hold_s):
+        peer = PeerConstraint(standing(np.array([2.0, 0.0]), 0.0), EPS, hold_s)
+        return PlanRequest(0.0, np.array([-2.0, 0.0]), np.zeros(2), np.array([2.0, 0.0]), 10.0,
+                           SAFETY.epsilon_obstacle(R), peers=(peer,))
+    held = plan_safely(request(3.0), bounds(1), PLANNER, CONFIG, room, None)
     assert held.outcome in (FIRST, RETRY) and held.verdict.ok, held.tried
-    assert np.linalg.norm(held.plan.positions[3] - request.position) > 0.05  # it drives
-    assert plan_safely(request, bounds(1), PLANNER, CONFIG, room, None).outcome == FALLBACK
+    assert np.linalg.norm(held.plan.positions[3] - np.array([-2.0, 0.0])) > 0.05  # it drives
+    assert plan_safely(request(None), bounds(1), PLANNER, CONFIG, room, None).outcome == FALLBACK
 
 
 def test_braking_slows_at_the_given_rate_along_the_path_and_stands():

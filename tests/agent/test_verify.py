@@ -55,18 +55,16 @@ def test_a_crossing_at_the_same_time_fails_and_the_same_paths_at_other_times_pas
     assert verify(ours, [PeerConstraint(later, EPS)], bounds(), room, CONFIG).ok
 
 
-def test_a_peer_is_held_where_its_plan_ends_for_peer_hold_s_then_no_longer(room):
+def test_a_peer_is_held_where_its_plan_ends_for_its_hold_then_no_longer(room):
     """A car waiting on our way (its plan a standing one that ends 2 s on) holds our plan
-    back for good by default; with a finite peer_hold_s only up to that long past the end
-    of its plan: by then its next plans say where it is."""
+    back for good by default; with a hold (PeerConstraint.hold_s) only up to that long
+    past the end of its plan: by then its next plans say where it is."""
     ours = line((-2.0, 0.0), (2.0, 0.0), duration=8.0)  # within eps of x = 1 from t = 5.1 s
     waiting = standing(np.array([1.0, 0.0]), 0.0)  # its plan ends at t = 2 s
-    held = dataclasses.replace(CONFIG, peer_hold_s=3.0)
-    assert verify(ours, [PeerConstraint(waiting, EPS)], bounds(), room, held).ok
-    assert CONFIG.peer_hold_s is None
+    assert verify(ours, [PeerConstraint(waiting, EPS, hold_s=3.0)], bounds(), room, CONFIG).ok
     assert not verify(ours, [PeerConstraint(waiting, EPS)], bounds(), room, CONFIG).ok
     renewed = standing(np.array([1.0, 0.0]), 2.5)  # its next plan, ending at 4.5 s: held past 6 s
-    verdict = verify(ours, [PeerConstraint(renewed, EPS)], bounds(), room, held)
+    verdict = verify(ours, [PeerConstraint(renewed, EPS, hold_s=3.0)], bounds(), room, CONFIG)
     assert not verdict.ok and verdict.conflicts[0].kind == "peer" and 5.0 < verdict.conflicts[0].t < 6.1
 
 
