@@ -53,8 +53,12 @@ def test_doorway_standoffs_are_resolved_by_giving_way():
     break the tie both stand until one gives way. Without resolution the standoffs never
     end (the report of issue 9 shows it). How often the tie is left unbroken depends on the
     network's draws: with the attack-era plan handling (issue 10) 2 of these 24 seeds stand
-    off (116, 118; with resolution off, 118 never arrives), so the test needs that many."""
+    off (116, 118; with resolution off, 118 never arrives), so the test needs that many.
+    The two swap places, and with verify.swap_first the one that goes first sets off while
+    the other waits for it to leave its goal -- no standoff in any of the 24 seeds (stop
+    37); switched off here, both set off together, as two cars that do not swap would."""
     scene = load_scenario(SCENES / "doorway-2.toml")
+    scene = dataclasses.replace(scene, verify=dataclasses.replace(scene.verify, swap_first=False))
     seeds = range(100, 124)
     with ProcessPoolExecutor(max_workers=min(2, os.cpu_count() or 1)) as pool:  # one run per core
         runs = [run for run, _ in pool.map(run_one, [scene] * len(seeds), seeds)]
