@@ -201,20 +201,29 @@ def summarise(scenario: Scenario, record: RunRecord) -> dict:
         detected = [metrics.trust_detection(record.trust_times, record.trust, liar, honest, TRUST_GAP) for liar in liars]
         run["trust_separated_at_s"] = None if None in separated else max(separated)
         run["trust_detected_at_s"] = None if None in detected else max(detected)
-        lies = [record.first_lie_s[i] for i in liars if record.first_lie_s and record.first_lie_s[i] is not None]
+        told = [record.first_lie_s[i] if record.first_lie_s else None for i in liars]
+        due = [first_false_claim(record.told[i], _truth(record, i), scenario.trust, after=first)
+               if first is not None and record.told and record.told[i] else None for i, first in zip(liars, told)]
+        lies = [t for t in told if t is not None]
         run["first_lie_s"] = round(float(min(lies)), 3) if lies else None
-        due = [first_false_claim(record.told[i], _truth(record, i), scenario.trust, after=record.first_lie_s[i])
-               for i in liars if record.told and record.told[i] and record.first_lie_s[i] is not None]
-        due = [t for t in due if t is not None]
-        run["first_lie_due_s"] = round(min(due), 3) if due else None
-        detected = run["trust_detected_at_s"]
-        run["detection_after_told_s"] = round(detected - run["first_lie_s"], 3) if lies and detected is not None else None
-        # timed from when, after its first lie (beyond plan_reject_m), a false claim of it
-        # first came due beyond the tolerance: the first evidence any observer could have.
-        # A seed whose lies were all withdrawn in time is timed from the telling.
-        since = run["first_lie_due_s"] if due else run["first_lie_s"]
-        run["detection_delay_s"] = round(detected - since, 3) if lies and detected is not None else None
+        run["first_lie_due_s"] = round(min(t for t in due if t is not None), 3) if any(t is not None for t in due) else None
+        # Each liar timed from its own lies (a colluding pair: the partner's first lie says
+        # nothing of when the other's could be caught), from when, after its first lie
+        # (beyond plan_reject_m), a false claim of it first came due beyond the tolerance:
+        # the first evidence any observer could have. A liar whose lies were all withdrawn
+        # in time is timed from the telling. The run's delay is the slowest liar's.
+        run["detection_after_told_s"] = detection_delay(detected, told)
+        run["detection_delay_s"] = detection_delay(detected, [d if d is not None else t for d, t in zip(due, told)])
     return run
+
+
+def detection_delay(detected: list[float | None], since: list[float | None]) -> float | None:
+    """The longest detection delay over the liars that lied (``since`` not None): each
+    liar's detection time less its own ``since``; None if one of them was never caught."""
+    delays = [None if caught is None else caught - start for caught, start in zip(detected, since) if start is not None]
+    if not delays or None in delays:
+        return None
+    return round(float(max(delays)), 3)
 
 
 # --- a whole experiment ------------------------------------------------------------------------

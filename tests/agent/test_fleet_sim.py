@@ -10,7 +10,7 @@ import os
 import numpy as np
 import pytest
 
-from trustfg.fleet.experiments import run_experiment, summarise
+from trustfg.fleet.experiments import detection_delay, run_experiment, summarise
 from trustfg.fleet.fleet_sim import simulate
 
 SEEDS = list(range(100, 108))
@@ -87,6 +87,16 @@ def test_liars_are_found_out_and_slander_sinks_no_one():
     assert all(run["first_lie_s"] is not None for attack in ("displaced", "false-future", "collude")
                for run in results[attack]["on"])
     assert all(run["honest_trust_min_after_settle"] >= 0.8 for run in results["slander"]["on"])
+
+
+def test_each_liar_of_a_pair_is_timed_from_its_own_lies():
+    """A colluding pair (held-out T-junction seed 5): car 3 lied first at -1.62 s, car 1 at
+    -0.7 s and was caught at 1.4 s -- 2.1 s after its own lie, not 3.02 s after its
+    partner's; a liar that never lied is not waited for, one never caught leaves None."""
+    assert detection_delay([1.4, 0.5], [-0.7, -1.62]) == pytest.approx(2.12)
+    assert detection_delay([None, 0.5], [None, -1.62]) == pytest.approx(2.12)
+    assert detection_delay([None, 0.5], [-0.7, -1.62]) is None
+    assert detection_delay([None, None], [None, None]) is None
 
 
 @pytest.mark.slow
