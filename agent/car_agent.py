@@ -80,7 +80,7 @@ import numpy as np
 
 from .attacks import Liar
 from .config import CarConfig, Scenario
-from .deadlock import DeadlockWatch, peers_seen
+from .deadlock import DeadlockWatch, goes_first, peers_seen
 from .evidence import PeerView, audit, belief, safety_verdict, take_plan
 from .gp import Plan, standing
 from .guard import speed_cap
@@ -305,15 +305,19 @@ class CarAgent:
     def _hold(self, peer: int) -> float | None:
         """How long verification holds ``peer`` where its plan ends (None: for good). For
         good, but for a peer we swap places with -- it stands on our goal, and its goal is
-        our start, each within eps_0 -- when we go first (the lower id, the deadlock
-        watch's order): then for VerifyConfig.peer_hold_s (VerifyConfig.swap_first). Each
-        waiting for the other to leave, the two would wait for ever; the one that goes
-        first sets off, and the other, whose plan now meets a moving one, follows."""
-        if not self.scenario.verify.swap_first or peer < self.car.id:
+        our start, each within eps_0 -- when we go first (the deadlock watch's order:
+        agent.deadlock.goes_first): then for VerifyConfig.peer_hold_s
+        (VerifyConfig.swap_first). Each waiting for the other to leave, the two would wait
+        for ever; the one that goes first sets off, and the other, whose plan now meets a
+        moving one, follows."""
+        if not self.scenario.verify.swap_first:
             return None
         view, track = self.peers.get(peer), self.tracks.get(peer)
         seen = track.motion() if track else None
         if view is None or view.goal is None or seen is None:
+            return None
+        heard = view.latest.yields if view.latest is not None else 0
+        if not goes_first(self.deadlock.yields, self.car.id, heard, peer):
             return None
         reach = self.epsilon_0(peer)
         on_our_goal = float(np.linalg.norm(seen.position - np.asarray(self.car.goal, float))) <= reach
@@ -501,7 +505,7 @@ class CarAgent:
         if self.liar is not None:
             shared, stamp = self.liar.plan(self.plan, now, self._motion(self.car.id, now), self._seen(now))
         return PlanMessage(self.car.id, self.next_seq("plan"), stamp, shared,
-                           (float(self.car.goal[0]), float(self.car.goal[1])))
+                           (float(self.car.goal[0]), float(self.car.goal[1])), yields=self.deadlock.yields)
 
     def _motion(self, car_id: int, now: float):
         track = self.tracks.get(car_id)
