@@ -316,8 +316,8 @@ class CarAgent:
         seen = track.motion() if track else None
         if view is None or view.goal is None or seen is None:
             return None
-        heard = view.latest.yields if view.latest is not None else 0
-        if not goes_first(self.deadlock.yields, self.car.id, heard, peer):
+        heard = view.latest.deadlocks if view.latest is not None else 0
+        if not goes_first(self.deadlock.been_through, self.car.id, heard, peer):
             return None
         reach = self.epsilon_0(peer)
         on_our_goal = float(np.linalg.norm(seen.position - np.asarray(self.car.goal, float))) <= reach
@@ -505,7 +505,7 @@ class CarAgent:
         if self.liar is not None:
             shared, stamp = self.liar.plan(self.plan, now, self._motion(self.car.id, now), self._seen(now))
         return PlanMessage(self.car.id, self.next_seq("plan"), stamp, shared,
-                           (float(self.car.goal[0]), float(self.car.goal[1])), yields=self.deadlock.yields)
+                           (float(self.car.goal[0]), float(self.car.goal[1])), deadlocks=self.deadlock.been_through)
 
     def _motion(self, car_id: int, now: float):
         track = self.tracks.get(car_id)

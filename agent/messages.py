@@ -19,8 +19,8 @@ and per kind:
             vel [...] (2N floats), goal [x, y]; and only when true, stuck true: the car
             is told to drive and does not move (bridge.motion_watch), its plan stands
             where it stands -- no car to give way to (agent.deadlock); and only when > 0,
-            yields int >= 0: how often the car has given way in a deadlock this trial (the
-            crowd lets the car that gave way most go first, agent.deadlock)
+            deadlocks int >= 0: how many deadlocks the car has been through this trial (the
+            crowd lets the car that has been through most go first, agent.deadlock)
     trust   peers {peer_id: {a: [3 floats >= 0], b: [3 floats >= 0], tau: [3 floats in
             [0, 1]], trust: float in [0, 1], eps: float > 0}}; a/b are the sender's DIRECT
             evidence (safety, consistency, transparency) -- testimonies never carry fused
@@ -70,7 +70,7 @@ MAX_MESSAGE_BYTES = 64 * 1024
 MAX_PLAN_STATES = 256
 MAX_PEERS = 255
 MAX_SEQ = 2**53
-MAX_YIELDS = 2**16
+MAX_DEADLOCKS = 2**16
 DIMENSIONS = ("safety", "consistency", "transparency")
 
 
@@ -83,8 +83,8 @@ class PlanMessage:
     goal: tuple[float, float]
     stuck: bool = False
     """The car does not move although it is told to (its plan stands where it stands)."""
-    yields: int = 0
-    """How often the car has given way in a deadlock this trial (agent.deadlock's order)."""
+    deadlocks: int = 0
+    """How many deadlocks the car has been through this trial (agent.deadlock's order)."""
 
     kind = "plan"
 
@@ -212,8 +212,8 @@ def encode(message: Message) -> bytes:
                     goal=[float(message.goal[0]), float(message.goal[1])])
         if message.stuck is not False:  # as given: a recording's value meets decode's check
             body["stuck"] = message.stuck
-        if message.yields != 0:
-            body["yields"] = message.yields
+        if message.deadlocks != 0:
+            body["deadlocks"] = message.deadlocks
     elif isinstance(message, TrustReport):
         body["peers"] = {
             int(peer): {"a": [float(x) for x in pt.alpha], "b": [float(x) for x in pt.beta],
@@ -298,7 +298,7 @@ def decode(payload: bytes) -> Message:
             departures[car] = (_float(entry, "depart"), _float(entry, "cruise", 1e-3, 10.0))
         return StartMessage(seq, stamp, trial, departures)
     if kind == "plan":
-        _only(body, {"t0", "dt", "pos", "vel", "goal"}, optional=frozenset({"stuck", "yields"}))
+        _only(body, {"t0", "dt", "pos", "vel", "goal"}, optional=frozenset({"stuck", "deadlocks"}))
         t0 = _float(body, "t0")
         dt = _float(body, "dt", low=1e-4, high=60.0)
         pos = _floats(body, "pos", 4, 2 * MAX_PLAN_STATES)
@@ -309,8 +309,8 @@ def decode(payload: bytes) -> Message:
         plan = Plan(t0=t0, dt=dt, positions=np.array(pos).reshape(-1, 2),
                     velocities=np.array(vel).reshape(-1, 2))
         stuck = _bool(body, "stuck") if "stuck" in body else False
-        yields = _int(body, "yields", 0, MAX_YIELDS) if "yields" in body else 0
-        return PlanMessage(sender, seq, stamp, plan, (goal[0], goal[1]), stuck, yields)
+        deadlocks = _int(body, "deadlocks", 0, MAX_DEADLOCKS) if "deadlocks" in body else 0
+        return PlanMessage(sender, seq, stamp, plan, (goal[0], goal[1]), stuck, deadlocks)
     if kind == "trust":
         _only(body, {"peers"})
         peers_raw = body.get("peers")
@@ -427,8 +427,8 @@ def to_dict(message: Message) -> dict[str, Any]:
                    velocities=np.asarray(message.plan.velocities).tolist())
         if message.stuck:
             out["stuck"] = True
-        if message.yields:
-            out["yields"] = message.yields
+        if message.deadlocks:
+            out["deadlocks"] = message.deadlocks
     elif isinstance(message, TrustReport):
         out["peers"] = {str(peer): {"alpha": list(pt.alpha), "beta": list(pt.beta), "tau": list(pt.tau),
                                     "trust": pt.trust, "epsilon": pt.epsilon}
@@ -455,7 +455,7 @@ def from_dict(data: dict[str, Any]) -> Message:
         if kind == "plan":
             message: Message = PlanMessage(sender, seq, stamp, Plan(data["t0"], data["dt"], np.array(data["positions"], dtype=float),
                                                                     np.array(data["velocities"], dtype=float)),
-                                           tuple(data["goal"]), data.get("stuck", False), data.get("yields", 0))
+                                           tuple(data["goal"]), data.get("stuck", False), data.get("deadlocks", 0))
         elif kind == "trust":
             message = TrustReport(sender, seq, stamp, {
                 int(peer): PeerTrust(tuple(p["alpha"]), tuple(p["beta"]), tuple(p["tau"]), p["trust"], p["epsilon"])

@@ -209,14 +209,14 @@ def test_of_two_cars_that_swap_places_the_first_does_not_wait_for_the_other_to_l
     held = intersection  # the default: swap_first, peer_hold_s = 3 s
     for_good = replace(intersection, verify=replace(intersection.verify, swap_first=False))
 
-    def hold(scenario, peer: int, goal, peer_yields: int = 0, our_yields: int = 0) -> float | None:
+    def hold(scenario, peer: int, goal, peer_deadlocks: int = 0, our_deadlocks: int = 0) -> float | None:
         agent = CarAgent(me, scenario, intersection_sdf)
-        agent.deadlock.yields = our_yields
+        agent.deadlock.been_through = our_deadlocks
         for k in range(3):
             t = 0.1 * k
             agent.observe(t, peer, me.goal[0], me.goal[1], 0.0)
             agent.receive(PlanMessage(peer, k, t, standing(np.asarray(me.goal, float), t), tuple(goal),
-                                      yields=peer_yields), t)
+                                      deadlocks=peer_deadlocks), t)
         return dict(agent.peer_constraints(0.2))[peer].hold_s
 
     after, before = me.id + 10, me.id - 1  # one that goes after us, one that goes before
@@ -225,6 +225,6 @@ def test_of_two_cars_that_swap_places_the_first_does_not_wait_for_the_other_to_l
     assert hold(held, after, (me.start[0] + 1.0, me.start[1])) is None  # its goal is elsewhere
     assert hold(held, after, me.start) == intersection.verify.peer_hold_s == 3.0
     assert hold(for_good, after, me.start) is None  # switched off: every peer for good
-    # the deadlock watch's order ages: a car that has given way more often goes first
-    assert hold(held, after, me.start, peer_yields=1) is None
-    assert hold(held, before, me.start, our_yields=1) == 3.0
+    # the deadlock watch's order ages: a car that has been through more deadlocks goes first
+    assert hold(held, after, me.start, peer_deadlocks=1) is None
+    assert hold(held, before, me.start, our_deadlocks=1) == 3.0

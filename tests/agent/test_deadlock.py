@@ -40,14 +40,14 @@ def seen(car: dict, moved: float = 0.0) -> PeerSeen:
 
 
 def watch_for(me: int, watch: DeadlockWatch, seconds: float, room, peer_moves: float = 0.0,
-              peer_at_goal: bool = False, peer_stuck: bool = False, peer_yields: int = 0) -> list:
+              peer_at_goal: bool = False, peer_stuck: bool = False, peer_deadlocks: int = 0) -> list:
     """Feed ``watch`` (car ``me``) the standoff for ``seconds``; the detours it returns."""
     mine, theirs, other = (ONE, TWO, 2) if me == 1 else (TWO, ONE, 1)
     detours = []
     for k, t in enumerate(np.arange(0.0, seconds, STEP_S)):
         peer = seen(theirs, moved=peer_moves * k * STEP_S)
-        if peer_at_goal or peer_stuck or peer_yields:
-            peer = dataclasses.replace(peer, at_goal=peer_at_goal, stuck=peer_stuck, yields=peer_yields)
+        if peer_at_goal or peer_stuck or peer_deadlocks:
+            peer = dataclasses.replace(peer, at_goal=peer_at_goal, stuck=peer_stuck, deadlocks=peer_deadlocks)
         detours.append(watch.goal(t, mine["position"], mine["goal"], {other: peer}, True,
                                   KEEP_CLEAR, room, WALL_CLEAR))
     return detours
@@ -68,19 +68,35 @@ def test_a_standoff_is_a_deadlock_for_both_and_only_the_higher_id_gives_way(room
     assert room.distance(detour) >= WALL_CLEAR
 
 
-def test_a_car_that_has_given_way_goes_first_the_next_time(room):
-    """The order ages: car 2 gave way once already (its plan messages say so), so in the
-    next standoff car 1 gives way and car 2 keeps its goal -- by id alone a car in the
-    middle of a crowd gives way at every deadlock it meets."""
+def test_a_car_that_has_been_through_more_deadlocks_goes_first(room):
+    """The order ages: car 2 has been through a deadlock already (its plan messages say
+    so), so in this standoff car 1 gives way and car 2 keeps its goal -- by id alone a
+    car in the middle of a crowd gives way at every deadlock it meets."""
     one, two = DeadlockWatch(1, CONFIG), DeadlockWatch(2, CONFIG)
-    two.yields = 1
+    two.been_through = 1
     seconds = CONFIG.window_s + 1.0
-    first = watch_for(1, one, seconds, room, peer_yields=1)
+    first = watch_for(1, one, seconds, room, peer_deadlocks=1)
     second = watch_for(2, two, seconds, room)
     assert one.deadlocks == 1 and two.deadlocks == 1
     assert all(d is None for d in second)  # car 2 goes first now
     assert one.yields == 1 and any(d is not None for d in first)
     assert goes_first(1, 2, 0, 1) and not goes_first(0, 2, 0, 1) and goes_first(2, 7, 2, 9)
+
+
+def test_a_deadlock_counts_once_it_is_over_for_both_roles(room):
+    """Counted while the group decides, the car that detected first would tell a higher
+    count and the others would give way to it while it gave way to them; so a deadlock
+    counts when it is over: the detour driven, or the group moving again."""
+    one, two = DeadlockWatch(1, CONFIG), DeadlockWatch(2, CONFIG)
+    seconds = CONFIG.window_s + 1.0
+    watch_for(1, one, seconds, room)
+    watch_for(2, two, seconds, room)
+    assert one.deadlocks == two.deadlocks == 1 and two.yields == 1
+    assert one.been_through == two.been_through == 0  # not over yet
+    t = seconds + CONFIG.yield_s + 0.5  # car 2's detour driven; car 1's group moves again
+    two.goal(t, TWO["position"], TWO["goal"], {1: seen(ONE, moved=1.0)}, True, KEEP_CLEAR, room, WALL_CLEAR)
+    one.goal(t, ONE["position"], ONE["goal"], {2: seen(TWO, moved=-1.0)}, True, KEEP_CLEAR, room, WALL_CLEAR)
+    assert one.been_through == two.been_through == 1  # the next standoff: car 1 first again
 
 
 def test_no_deadlock_is_seen_before_a_whole_window_of_no_progress(room):

@@ -55,15 +55,15 @@ def test_round_trip(message):
         assert again == message
 
 
-def test_a_plan_tells_how_often_its_car_gave_way_and_bad_counts_are_refused():
-    gave_way = PlanMessage(2, 1, 10.01, plan_message().plan, (0.4, 2.15), yields=3)
-    assert decode(encode(gave_way)).yields == 3
-    assert "yields" not in msgpack.unpackb(encode(plan_message()))  # the field only when > 0
-    assert decode(encode(plan_message())).yields == 0
-    assert messages.from_dict(messages.to_dict(gave_way)).yields == 3
+def test_a_plan_tells_how_many_deadlocks_its_car_has_been_through_and_bad_counts_are_refused():
+    been_through = PlanMessage(2, 1, 10.01, plan_message().plan, (0.4, 2.15), deadlocks=3)
+    assert decode(encode(been_through)).deadlocks == 3
+    assert "deadlocks" not in msgpack.unpackb(encode(plan_message()))  # the field only when > 0
+    assert decode(encode(plan_message())).deadlocks == 0
+    assert messages.from_dict(messages.to_dict(been_through)).deadlocks == 3
     for bad in (-1, 2.5, True, "3", 2**40):
-        with pytest.raises(MessageError, match="yields"):
-            decode(mutate(gave_way, yields=bad))
+        with pytest.raises(MessageError, match="deadlocks"):
+            decode(mutate(been_through, deadlocks=bad))
 
 
 def test_a_stuck_plan_says_so_and_a_plan_without_the_field_is_not_stuck():
