@@ -39,10 +39,11 @@ it meets (circle-16 seeds 0 and 49: cars that gave way 2-5 times were still out 
 timeout); a car that has been through more deadlocks goes first. A deadlock counts
 once it is over -- for the car that gave way when its detour is driven, for the one that
 went first when its group moves again -- so that the count does not change while the
-group decides: counted at detection, the car that detected first would tell a higher
-count and the others would give way to it while it gave way to them (tried: bottleneck-4
-seeds 0-7, 37 yields against 24, one run 38 % slower); counted for both roles, the car
-that went first does not lose its turn to the car it made give way. A car that claims
+group decides: counted as it was decided (tried: a car's yields, counted as it gave
+way), the car that decided first told a higher count and the others gave way to it as
+well, and on its return the car that had gone first lost its turn to it (bottleneck-4
+seeds 0-7: 37 yields against 24, one run 38 % slower); counted over, for both roles,
+the car that went first keeps its turn. A car that claims
 deadlocks it never met takes the right of way, which costs the others time, not safety
 (every plan is verified whoever goes first).
 
