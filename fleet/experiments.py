@@ -204,9 +204,9 @@ def summarise(scenario: Scenario, record: RunRecord) -> dict:
         told = [record.first_lie_s[i] if record.first_lie_s else None for i in liars]
         due = [first_false_claim(record.told[i], _truth(record, i), scenario.trust, after=first)
                if first is not None and record.told and record.told[i] else None for i, first in zip(liars, told)]
-        lies = [t for t in told if t is not None]
+        lies, came_due = [t for t in told if t is not None], [t for t in due if t is not None]
         run["first_lie_s"] = round(float(min(lies)), 3) if lies else None
-        run["first_lie_due_s"] = round(min(t for t in due if t is not None), 3) if any(t is not None for t in due) else None
+        run["first_lie_due_s"] = round(min(came_due), 3) if came_due else None
         # Each liar timed from its own lies (a colluding pair: the partner's first lie says
         # nothing of when the other's could be caught), from when, after its first lie
         # (beyond plan_reject_m), a false claim of it first came due beyond the tolerance:

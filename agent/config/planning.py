@@ -246,7 +246,7 @@ class VerifyConfig:
     """Verification holds a peer where its plan ends for good (a parked car stays parked,
     a car waiting on our goal is waited for), but for the peer we swap places with -- it
     stands on our goal and its goal is our start (agent.car_agent) -- when we go first
-    (the lower id, the deadlock watch's order): that one only ``peer_hold_s`` past the
+    (the deadlock watch's order, agent.deadlock.goes_first): that one only ``peer_hold_s`` past the
     end of its plan. Each waiting for the other to leave, two such cars stand for good,
     and a ring of them did: at the go of circle-16 every car's plan failed at its far end
     against the car waiting on its goal, and the ring stood on its fallbacks for 2-4 s
