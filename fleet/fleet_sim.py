@@ -63,7 +63,8 @@ def simulate(scenario: Scenario, seed: int, sdf: SignedDistanceField | None = No
     depart, cruise = draw_departures(scenario, rng)
     control = scenario.control
     step_s = 1.0 / control.command_rate_hz
-    phase = rng.uniform(0.0, control.replan_period_s, n)
+    spread = control.replan_period_s if sim.replan_phase_max_s is None else sim.replan_phase_max_s
+    phase = rng.uniform(0.0, spread, n)
     noise_rng = np.random.default_rng([seed, 7])
 
     def minds(departures) -> list[CarAgent]:

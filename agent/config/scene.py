@@ -183,6 +183,11 @@ class SimConfig:
     2 s, 30 of 40 seeds breach with avoidance off."""
     cruise_speed_range_mps: tuple[float, float] = (0.35, 0.45)
     """Each car's cruise speed is drawn from this range per seed."""
+    replan_phase_max_s: float | None = None
+    """In-process fleet: each car's replans fall U(0, this) into the replan period (None:
+    the whole period, as car processes started one by one do). 0: every car replans at
+    the same instants -- two cars set off together at the same speed then see each other
+    alike, the tie no phase breaks (a door one car wide: both stand)."""
     settle_s: float = 2.0
     """Cars stand this long at their starts, seeing and hearing each other, before the
     go: ``trustfg sim`` gives the go no sooner after the last car came up, and the
@@ -195,7 +200,8 @@ class SimConfig:
     def validate(self, path: str) -> None:
         positive(self.timeout_s, f"{path}.timeout_s")
         if (self.observation_noise_m < 0 or self.message_latency_s < 0 or self.message_jitter_s < 0
-                or self.start_delay_max_s < 0 or self.settle_s < 0):
+                or self.start_delay_max_s < 0 or self.settle_s < 0
+                or (self.replan_phase_max_s is not None and self.replan_phase_max_s < 0)):
             raise ConfigError(f"{path}: noise, latency, jitter and delay must be >= 0")
         if not 0.0 <= self.message_loss < 1.0:
             raise ConfigError(f"{path}.message_loss: must be within [0, 1)")
