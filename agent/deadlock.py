@@ -56,7 +56,11 @@ a car creeping on its fallback's brake does (bottleneck-4 seed 4: 2.5 cm/s, more
 progress than ``progress_m``, and every plan refused) -- not at its goal, has no way to
 its goal -- no connected free space keeping the wall's epsilon from walls and eps_0
 from every car that stands (parked, waiting to depart, stuck, or stuck as the window
-saw it) -- while it would have one were we not where we stand. A car
+saw it) -- while it would have one were we not where we stand; or it stands inside our
+keep-out (eps_0 from us) and would have a way without us: a car pressed into the pinch
+between a wall and us counts as in the region of its nearest free cell, which may lie on
+the pinch's far side (a held-out field, random-field-6-s93374344 seed 3: a car stood 40 s
+0.43 m from one parked at its goal, counted as having a way). A car
 that stands but is not parked counts as a wall too: a road's dead end, a car parked
 across the road's one lane and a car stuck in the other -- two cars wall the third
 in, and neither the yielding rule (the stuck one has nowhere to give way to) nor a rule
@@ -203,7 +207,9 @@ class DeadlockWatch:
             if peer.at_goal or peer.waiting or peer.stuck or peer.goal is None or cid not in stuck:
                 continue
             walls = [(tuple(peers[other].position), keep_clear) for other in standing if other != cid]
-            if connected(sdf, peer.position, peer.goal, wall_clear, [*walls, (tuple(position), keep_clear)]):
+            pressed = float(np.linalg.norm(peer.position - position)) < keep_clear
+            if not pressed and connected(sdf, peer.position, peer.goal, wall_clear,
+                                         [*walls, (tuple(position), keep_clear)]):
                 continue
             if not connected(sdf, peer.position, peer.goal, wall_clear, walls):
                 continue  # walled in, but not by us alone

@@ -219,6 +219,31 @@ def test_a_peer_stopped_a_little_inside_the_wall_clearance_is_walled_in_all_the_
     assert all(a is None for a in parked_for(watch, CONFIG.window_s + 1.0, pocket, peer=inside))
 
 
+def test_a_stuck_peer_pressed_into_the_pinch_between_us_and_a_wall_is_walled_in(pocket):
+    """A held-out field (random-field-6-s93374344, seed 3): a car stood for good in the
+    pinch between a pillar's corner and a car parked at its goal, 0.43 m from the parked
+    car, its goal beyond the pinch. Its region's nearest free cell (routes.SNAP_M) lay
+    on the far side, so it counted as having a way with the parked car where it stood,
+    and the parked car never stepped aside (233 fallbacks, 40 s). A stuck peer inside our
+    keep-out is walled in by us whatever the snap says."""
+    parked = np.array([0.98, 0.0])  # the gap to the wall's end is 0.68 m: 0.7 m would pass
+    pressed = PeerSeen(np.array([0.55, 0.01]), goal=WALLED_IN.goal)  # a centimetre past the narrowest line
+    assert np.linalg.norm(pressed.position - parked) < KEEP_CLEAR
+    assert connected(pocket, pressed.position, pressed.goal, WALL_CLEAR, [(tuple(parked), KEEP_CLEAR)])
+    assert not connected(pocket, WALLED_IN.position, WALLED_IN.goal, WALL_CLEAR, [(tuple(parked), KEEP_CLEAR)])
+    watch = DeadlockWatch(1, CONFIG)
+    asides = [watch.step_aside(t, parked, parked, {2: pressed}, KEEP_CLEAR, pocket, WALL_CLEAR)
+              for t in np.arange(0.0, CONFIG.window_s + 1.0, STEP_S)]
+    aside = next(a for a in asides if a is not None)
+    assert watch.steps_aside == 1 and np.linalg.norm(aside - pressed.position) > KEEP_CLEAR
+    # ... and a stuck peer as near that has a way and is not inside our keep-out: we stay
+    beside = PeerSeen(np.array([0.5, 0.5]), goal=WALLED_IN.goal)
+    assert np.linalg.norm(beside.position - parked) > KEEP_CLEAR
+    watch = DeadlockWatch(1, CONFIG)
+    assert all(watch.step_aside(t, parked, parked, {2: beside}, KEEP_CLEAR, pocket, WALL_CLEAR) is None
+               for t in np.arange(0.0, CONFIG.window_s + 1.0, STEP_S))
+
+
 def test_a_point_deep_in_a_wall_is_in_no_region(pocket):
     assert not connected(pocket, (-0.7, 0.0), WALLED_IN.goal, WALL_CLEAR, [])  # the wall's middle: 0.3 m from free
 
