@@ -7,12 +7,16 @@ easier to debug and profile. The workers ignore SIGINT, so Ctrl-C in a terminal 
 this process alone; it terminates the workers at once (the runs under way are lost, the
 finished ones are the caller's) and raises KeyboardInterrupt. With a process pool that
 waits for its queue on exit, Ctrl-C used to leave a long bank running to its end.
+SIGTERM (``kill``, a job scheduler's stop) unwinds the same way while the workers run:
+it killed this process alone, and each worker, finishing its run, died on a broken pipe
+with a traceback.
 """
 
 from __future__ import annotations
 
 import multiprocessing
 import signal
+import threading
 from collections.abc import Callable, Iterable, Iterator
 from typing import TypeVar
 
@@ -31,6 +35,8 @@ def parallel(fn: Callable[[Task], Result], tasks: Iterable[Task], jobs: int,
         return
     warm_compiled()  # the planner's compiled loops, made once before the workers fork
     pool = multiprocessing.Pool(jobs, initializer=signal.signal, initargs=(signal.SIGINT, signal.SIG_IGN))
+    on_main = threading.current_thread() is threading.main_thread()  # where Python runs handlers
+    previous = signal.signal(signal.SIGTERM, _interrupt) if on_main else None  # after the fork: not the workers'
     try:
         calls = [(fn, index, task) for index, task in enumerate(tasks)]
         for index, result in (pool.imap if ordered else pool.imap_unordered)(_call, calls):
@@ -39,6 +45,12 @@ def parallel(fn: Callable[[Task], Result], tasks: Iterable[Task], jobs: int,
     finally:
         pool.terminate()  # Ctrl-C, an error, or the caller stopped early: no worker outlives us
         pool.join()
+        if on_main:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _interrupt(signum, frame) -> None:
+    raise KeyboardInterrupt
 
 
 def _call(call: tuple[Callable, int, object]) -> tuple[int, object]:
