@@ -59,7 +59,7 @@ from every car that stands (parked, waiting to depart, stuck, or stuck as the wi
 saw it) -- while it would have one were we not where we stand; or it stands inside our
 keep-out (eps_0 from us) and would have a way without us: a car pressed into the pinch
 between a wall and us counts as in the region of its nearest free cell, which may lie on
-the pinch's far side (a held-out field, random-field-6-s93374344 seed 3: a car stood 40 s
+the pinch's far side (a held-out field, random-field-6-s93374344 seed 3: a car stood 48 s
 0.43 m from one parked at its goal, counted as having a way). A car
 that stands but is not parked counts as a wall too: a road's dead end, a car parked
 across the road's one lane and a car stuck in the other -- two cars wall the third

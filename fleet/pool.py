@@ -45,7 +45,7 @@ def parallel(fn: Callable[[Task], Result], tasks: Iterable[Task], jobs: int,
     finally:
         pool.terminate()  # Ctrl-C, an error, or the caller stopped early: no worker outlives us
         pool.join()
-        if on_main:
+        if on_main and previous is not None:  # None: set outside Python, nothing to put back
             signal.signal(signal.SIGTERM, previous)
 
 

@@ -224,7 +224,7 @@ def test_a_stuck_peer_pressed_into_the_pinch_between_us_and_a_wall_is_walled_in(
     pinch between a pillar's corner and a car parked at its goal, 0.43 m from the parked
     car, its goal beyond the pinch. Its region's nearest free cell (routes.SNAP_M) lay
     on the far side, so it counted as having a way with the parked car where it stood,
-    and the parked car never stepped aside (233 fallbacks, 40 s). A stuck peer inside our
+    and the parked car never stepped aside (233 fallbacks, 48 s). A stuck peer inside our
     keep-out is walled in by us whatever the snap says."""
     parked = np.array([0.98, 0.0])  # the gap to the wall's end is 0.68 m: 0.7 m would pass
     pressed = PeerSeen(np.array([0.55, 0.01]), goal=WALLED_IN.goal)  # a centimetre past the narrowest line
