@@ -398,10 +398,6 @@ def table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def _interrupt(signum, frame) -> None:
-    raise KeyboardInterrupt
-
-
 def main(argv: list[str] | None = None) -> int:
     parser = command_parser("trustfg faults", __doc__, epilog="Needs root: network namespaces and nftables.")
     parser.add_argument("--seeds", type=int, default=3, help="runs per case (seeds 0..K-1)")
@@ -414,7 +410,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     out = args.out or Path("runs") / time.strftime("faults-%Y%m%d-%H%M%S")
     # SIGTERM unwinds like Ctrl-C, so every namespace, rule and process is removed.
-    signal.signal(signal.SIGTERM, _interrupt)
+    signal.signal(signal.SIGTERM, signal.default_int_handler)
     rows = []
     for name in args.cases:
         for seed in range(args.seeds):

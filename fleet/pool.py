@@ -36,7 +36,8 @@ def parallel(fn: Callable[[Task], Result], tasks: Iterable[Task], jobs: int,
     warm_compiled()  # the planner's compiled loops, made once before the workers fork
     pool = multiprocessing.Pool(jobs, initializer=signal.signal, initargs=(signal.SIGINT, signal.SIG_IGN))
     on_main = threading.current_thread() is threading.main_thread()  # where Python runs handlers
-    previous = signal.signal(signal.SIGTERM, _interrupt) if on_main else None  # after the fork: not the workers'
+    # Python's own Ctrl-C handler (raises KeyboardInterrupt); after the fork: not the workers'
+    previous = signal.signal(signal.SIGTERM, signal.default_int_handler) if on_main else None
     try:
         calls = [(fn, index, task) for index, task in enumerate(tasks)]
         for index, result in (pool.imap if ordered else pool.imap_unordered)(_call, calls):
@@ -47,10 +48,6 @@ def parallel(fn: Callable[[Task], Result], tasks: Iterable[Task], jobs: int,
         pool.join()
         if on_main and previous is not None:  # None: set outside Python, nothing to put back
             signal.signal(signal.SIGTERM, previous)
-
-
-def _interrupt(signum, frame) -> None:
-    raise KeyboardInterrupt
 
 
 def _call(call: tuple[Callable, int, object]) -> tuple[int, object]:
