@@ -68,6 +68,7 @@ optimises as always. It trades plans improved at every period for CPU.
 
 from __future__ import annotations
 
+import bisect
 import dataclasses
 import logging
 import math
@@ -83,7 +84,7 @@ from .config import CarConfig, Scenario
 from .deadlock import DeadlockWatch, goes_first, peers_seen
 from .evidence import PeerView, audit, belief, safety_verdict, take_plan
 from .gp import Plan, standing
-from .guard import speed_cap
+from .guard import capped_below
 from .messages import PlanMessage, TrustReport
 from .planner import PeerConstraint, PlanningError, PlanRequest, PlanResult
 from .safe_plan import FALLBACK, FIRST, KEPT, RETRY, Outcome, plan_safely
@@ -233,7 +234,7 @@ class CarAgent:
                 view.velocities.append((motion.stamp, motion.velocity))
                 if view.accepted is not None:
                     announced = view.accepted.state_at(np.array([motion.stamp]))[1][0]
-                    if self._guard_holds(peer, motion, motions, announced) or self._turns_first(motion, announced):
+                    if self._turns_first(motion, announced) or self._guard_holds(peer, motion, motions, announced):
                         view.held.append(motion.stamp)
                 mismatch = _acceleration_mismatch(view, self.scenario.control.replan_period_s + REPLAN_MARGIN_S,
                                                   now - config.stale_after_s)
@@ -252,9 +253,8 @@ class CarAgent:
         if not self.scenario.guard.enabled:
             return False
         others = [(*m.position, m.yaw, self.radius(cid)) for cid, m in motions.items() if cid != peer]
-        cap = speed_cap(*motion.position, motion.yaw, self.radius(peer), others, self.scenario.guard,
-                        self.scenario.safety, self.sdf)
-        return cap < float(np.linalg.norm(announced)) - GUARD_SLACK_MPS
+        return capped_below(*motion.position, motion.yaw, self.radius(peer), others, self.scenario.guard,
+                            self.scenario.safety, self.sdf, float(np.linalg.norm(announced)) - GUARD_SLACK_MPS)
 
     def _turns_first(self, motion, announced: np.ndarray) -> bool:
         """Does the peer seen in ``motion`` face so far from where the plan it announced goes
@@ -565,16 +565,30 @@ def _acceleration_mismatch(view: PeerView, fresh_s: float, until: float) -> tupl
         return None
     # Its guard held it back, or it turned on the spot first, as honest cars do: then it
     # is held only to going no faster than it said.
-    held = any(t_old <= moment <= t for moment in view.held)
+    first_held = bisect.bisect_left(view.held, t_old)  # stamps in the order seen, so sorted
+    held = first_held < len(view.held) and view.held[first_held] <= t
     measure = _overspeed if held else _acceleration_change
     mismatch = measure(announced[1], t_old, observed_old, t, observed)
     since = [(stamp, p) for stamp, p in view.history if t_old < stamp <= t - ANNOUNCED_MIN_S]
     if since:
         stamp, plan = max(since, key=lambda sp: sp[0])  # the latest made, whatever came first
-        then = min(view.velocities, key=lambda tv: abs(tv[0] - stamp))
+        then = _nearest(view.velocities, stamp)
         if abs(then[0] - stamp) <= 0.5 * ANNOUNCED_MIN_S:
             mismatch = min(mismatch, measure(plan, then[0], then[1], t, observed))
     return mismatch, t_old, t
+
+
+def _nearest(velocities: deque, stamp: float) -> tuple[float, np.ndarray]:
+    """The (t, v) of ``velocities`` (sorted by t: appended as seen) nearest ``stamp``, the
+    earlier of two as near: ``min(velocities, key=|t - stamp|)`` by bisection."""
+    def t(tv):
+        return tv[0]
+    right = bisect.bisect_left(velocities, stamp, key=t)
+    if right == 0:
+        return velocities[0]
+    if right == len(velocities) or abs(velocities[right - 1][0] - stamp) <= abs(velocities[right][0] - stamp):
+        return velocities[bisect.bisect_left(velocities, velocities[right - 1][0], key=t)]  # the first of equals
+    return velocities[right]
 
 
 def _acceleration_change(plan, t_old: float, observed_old: np.ndarray, t: float, observed: np.ndarray) -> float:

@@ -81,6 +81,23 @@ def speed_cap(x: float, y: float, yaw: float, radius_m: float,
                for k in range(steps + 1))
 
 
+def capped_below(x: float, y: float, yaw: float, radius_m: float,
+                 others: Iterable[tuple[float, float, float, float]], config: GuardConfig,
+                 safety: SafetyConfig, sdf: SignedDistanceField | None, speed: float) -> bool:
+    """``speed_cap(x, y, yaw, radius_m, others, config, safety, sdf) < speed``, the same
+    answer at less cost: the cap is a minimum of terms >= 0, so a speed <= 0 is never
+    above it, and the walls' ray march (the dearest term) is left out when a car ahead
+    already holds the speed down. For a truster asking of every peer ten times a second
+    whether its guard holds it (agent.car_agent)."""
+    if not speed > 0.0:
+        return False
+    t_r = config.reaction_s
+    if _cap_at(x, y, yaw, radius_m, list(others), config, safety, None, t_r) < speed:
+        return True
+    return sdf is not None and stopping_speed(wall_room(x, y, yaw, sdf, radius_m + config.wall_clearance_m),
+                                              config, t_r) < speed
+
+
 def _cap_at(x: float, y: float, yaw: float, radius_m: float, others: list[tuple[float, float, float, float]],
             config: GuardConfig, safety: SafetyConfig, sdf: SignedDistanceField | None, t_r: float) -> float:
     cap = math.inf if sdf is None else stopping_speed(wall_room(x, y, yaw, sdf, radius_m + config.wall_clearance_m), config, t_r)

@@ -1,6 +1,8 @@
 """CarAgent's consistency evidence: a peer is held to what it announced, and lost or
 delayed plans never read as erratic driving."""
 
+import random
+from collections import deque
 from dataclasses import replace
 
 import numpy as np
@@ -228,3 +230,16 @@ def test_of_two_cars_that_swap_places_the_first_does_not_wait_for_the_other_to_l
     # the deadlock watch's order ages: a car that has been through more deadlocks goes first
     assert hold(held, after, me.start, peer_deadlocks=1) is None
     assert hold(held, before, me.start, our_deadlocks=1) == 3.0
+
+
+def test_the_observation_nearest_a_stamp_is_found_by_bisection_as_by_a_scan():
+    """The consistency check's look-up of the velocity seen nearest a plan's stamp, by
+    bisection, picks what a scan of every sample picks: the earlier of two as near, the
+    first of equal stamps, either end beyond the samples."""
+    rng = random.Random(1)
+    for _ in range(5000):
+        n = rng.randint(1, 64)
+        stamps = sorted(rng.choice([rng.random(), round(rng.random(), 1)]) for _ in range(n))
+        seen = deque(((t, i) for i, t in enumerate(stamps)), maxlen=64)
+        stamp = rng.choice([rng.random(), round(rng.random() * 20) / 20, stamps[rng.randrange(n)], -1.0, 2.0])
+        assert car_agent._nearest(seen, stamp) == min(seen, key=lambda tv: abs(tv[0] - stamp))

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from trustfg.agent.config import GuardConfig, SafetyConfig, VehicleConfig
-from trustfg.agent.guard import reaction_time, speed_cap, wall_room
+from trustfg.agent.guard import capped_below, reaction_time, speed_cap, wall_room
 from trustfg.agent.vehicle import VehicleState, step
 
 GUARD = GuardConfig()
@@ -258,3 +258,22 @@ def test_a_car_turning_into_a_car_beside_it_keeps_the_stop_distance(seed):
 def test_checking_the_present_heading_alone_breaches_in_a_turn():
     least = [turning_in(seed, sweep=False) for seed in range(40)]
     assert sum(d < SAFETY.breach_distance(RADIUS, RADIUS) for d in least) >= 10  # 17 of 40, down to 0.265 m
+
+
+def test_capped_below_answers_as_the_cap_does(intersection_sdf):
+    """The truster's cheaper question (is a peer's guard holding it below a speed?) has the
+    cap's own answer: random cars among random others, near walls and in the open."""
+    rng = np.random.default_rng(7)
+    disagree, held = 0, 0
+    for _ in range(3000):
+        x, y = rng.uniform(-2.5, 2.5, 2)
+        yaw = rng.uniform(-math.pi, math.pi)
+        others = [(*rng.uniform(-2.5, 2.5, 2), rng.uniform(-math.pi, math.pi), RADIUS)
+                  for _ in range(rng.integers(0, 8))]
+        sdf = intersection_sdf if rng.random() < 0.7 else None
+        speed = float(rng.choice([rng.uniform(-0.2, 1.0), 0.0]))
+        full = speed_cap(x, y, yaw, RADIUS, others, GUARD, SAFETY, sdf) < speed
+        held += full
+        disagree += full != capped_below(x, y, yaw, RADIUS, others, GUARD, SAFETY, sdf, speed)
+    assert disagree == 0
+    assert 300 < held < 2700  # both answers were asked for
