@@ -57,6 +57,16 @@ keep each car near its previous plan (a car does not flip sides between replans)
 cruise speed, so a car always intends to move on and waits only while someone is in
 its way (no car plans to wait for another that waits for it).
 
+Seen standing (``trust.standing_seen_s`` > 0; off by default): a peer we have seen stand
+still that long -- every observation of it within STANDING_SEEN_M of the newest, none
+older than ``stale_after_s`` -- is planned against where it stands, at eps_0 if its
+epsilon would be wider, whatever its trust or its plans say. Epsilon widens with
+distrust because a distrusted car may be elsewhere than it says; one seen standing is
+where it is seen, and from rest it closes a gap slowly: at the vehicle's 1.5 m/s^2,
+1/2 a t^2 = 0.05 m in the 0.25 s a replan and a frame take to see it go, a third of
+eps_0's 0.15 m beyond the breach distance -- no more than an honest car parked there
+could do unannounced; the guard is under both. The moment it moves the rule lets go.
+
 Kept plans (``verify.keep_s`` > 0; off by default): a replan may keep the current plan
 instead of optimising anew -- for at most ``keep_s`` after it was optimised, only while
 the car tracks it (a new plan would start from it), it still goes to the goal, no
@@ -109,6 +119,9 @@ ANNOUNCED_MIN_S = 0.2
 GUARD_SLACK_MPS = 0.05
 """A peer counts as held by its guard when the cap we compute for it is this much below
 its plan's speed (our view of the poses is not exactly its own)."""
+STANDING_SEEN_M = 0.02
+"""A peer whose observations over ``trust.standing_seen_s`` all lie this close to its newest
+stands still (motion capture's noise is a millimetre or so)."""
 WARM_GOAL_M = 0.25
 """A plan that ends further than this from the goal does not warm-start a replan."""
 START_FROM_PLAN_M = 0.05
@@ -294,13 +307,37 @@ class CarAgent:
                 else:
                     self.counters["peers_unverified"] += 1  # not checked yet: not as if trusted
                     epsilon = widest
-                constraints.append((peer, PeerConstraint(plan, epsilon, self._hold(peer))))
-                continue
-            predicted = self._predict_from_observation(peer, now)
-            if predicted is not None:
+            else:
+                plan, epsilon = self._predict_from_observation(peer, now), widest
+                if plan is None:
+                    continue
                 self.counters["peers_predicted"] += 1
-                constraints.append((peer, PeerConstraint(predicted, widest, self._hold(peer))))
+            if trust.standing_seen_s > 0 and epsilon > self.epsilon_0(peer):
+                stands_at = self._seen_standing(peer, now)
+                if stands_at is not None:  # where it is seen, at eps_0 (module docstring, "Seen standing")
+                    self.counters["peers_seen_standing"] += 1
+                    plan, epsilon = standing(stands_at, now), self.epsilon_0(peer)
+            constraints.append((peer, PeerConstraint(plan, epsilon, self._hold(peer))))
         return constraints
+
+    def _seen_standing(self, peer: int, now: float) -> np.ndarray | None:
+        """Where ``peer`` stands if every observation of it over the last
+        ``trust.standing_seen_s`` lies within STANDING_SEEN_M of the newest, the newest
+        and every gap between them no older or longer than ``stale_after_s``; else None."""
+        track, trust = self.tracks.get(peer), self.scenario.trust
+        if track is None or track.last_stamp is None or now - track.last_stamp > trust.stale_after_s:
+            return None
+        samples = track.samples
+        since = samples[-1, 0] - trust.standing_seen_s
+        if samples[0, 0] > since:
+            return None  # not seen that long
+        recent = samples[max(int(np.searchsorted(samples[:, 0], since, side="right")) - 1, 0):]
+        if len(recent) > 1 and np.max(np.diff(recent[:, 0])) > trust.stale_after_s:
+            return None  # unseen for a while within it: it may have moved
+        positions = recent[:, 1:3]
+        if np.max(np.linalg.norm(positions - positions[-1], axis=1)) > STANDING_SEEN_M:
+            return None
+        return positions[-1].copy()
 
     def _hold(self, peer: int) -> float | None:
         """How long verification holds ``peer`` where its plan ends (None: for good). For

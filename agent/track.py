@@ -13,6 +13,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .config.planning import TRACK_HISTORY_S
+
 NEAREST_S = 0.05
 """An observation stands for a moment this close to it (Track.position_at)."""
 
@@ -34,7 +36,7 @@ faster than any motion capture sends cannot grow a track without bound."""
 @dataclass
 class Track:
     window_s: float = 0.4
-    history_s: float = 2.0
+    history_s: float = TRACK_HISTORY_S
     _buffer: np.ndarray = field(default_factory=lambda: np.empty((256, 4)), init=False, repr=False)
     """Rows (t, x, y, yaw); the live ones are ``_buffer[_lo:_hi]``, oldest first. Appends
     go at the end and old rows leave at the front, so reads are slices of one array: a

@@ -6,6 +6,9 @@ from dataclasses import dataclass
 
 from .checks import ConfigError, positive
 
+TRACK_HISTORY_S = 2.0
+"""How long a car keeps its observations of every car (agent.track.Track.history_s)."""
+
 
 @dataclass(frozen=True)
 class PlannerConfig:
@@ -167,6 +170,12 @@ class TrustConfig:
     blame_closing_mps: float = 0.05
     """Of two cars closer than the breach distance, a car is blamed (a safety failure)
     only if it closes the gap faster than this: a car tailgated or stood still is not."""
+    standing_seen_s: float = 0.0
+    """A peer seen standing still this long (every observation of it within STANDING_SEEN_M
+    of the newest; 0: off, at most the track's 2 s) is planned against where it stands at
+    no more than eps_0, whatever its trust or its plans say: from rest a car closes a
+    gap only slowly (1/2 a t^2), and the next replan sees it move (agent.car_agent,
+    "Seen standing"). A caught liar parked beside a goal otherwise closes it for good."""
     epsilon_gain_fixed: float = 1.0
     """g for every peer when the transparency factor is off (planner.transparency = false):
     1 keeps eps_0 from everyone (the paper's baseline); a uniformly careful fleet (the
@@ -185,6 +194,8 @@ class TrustConfig:
             raise ConfigError(f"{path}.epsilon_gain_max/epsilon_gain_fixed: must be >= 1")
         if not 0.0 < self.epsilon_quantile < 1.0:
             raise ConfigError(f"{path}.epsilon_quantile: must be within (0, 1)")
+        if not 0.0 <= self.standing_seen_s <= TRACK_HISTORY_S:
+            raise ConfigError(f"{path}.standing_seen_s: must be within [0, {TRACK_HISTORY_S:g}] s (0: off)")
         if self.audit_max_plans < 1:
             raise ConfigError(f"{path}.audit_max_plans: must be >= 1")
         if self.audit_tolerance_growth_mps < 0 or self.blame_closing_mps < 0 or self.audit_grace_s < 0:

@@ -255,3 +255,26 @@ def test_two_small_lies_separate_a_liar_and_pass_as_noise_when_graded(intersecti
     assert gap_max() >= 0.2
     monkeypatch.setattr(audit, "false_now", audit.graded_failure)
     assert gap_max() < 0.15
+
+
+# --- a caught liar seen standing: where it is seen, at eps_0 ----------------------------------------------
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_a_caught_liar_seen_standing_is_kept_at_eps_0_where_it_stands_and_not_once_it_moves(
+        intersection, intersection_sdf, seed):
+    """A liar caught lying (displaced plans) parks: with ``standing_seen_s`` it is planned
+    against where it is seen, at eps_0 (a caught liar parked beside a goal closed it, README
+    "held out since stop 39"); without, at the wide epsilon of its distrust; and the rule
+    lets go of a liar that drives."""
+    attack, eps_0 = AttackConfig("displaced"), 0.45
+    seeing = replace(intersection, trust=replace(intersection.trust, standing_seen_s=1.0))
+    for scenario, speed, standing_rule in ((seeing, 0.0, True), (intersection, 0.0, False), (seeing, 0.4, False)):
+        agent = watch(scenario, intersection_sdf, seed, attack, speed=speed)
+        assert transparency(agent, 5.0) < intersection.trust.tau_floor  # caught: distrusted
+        kept = dict(agent.peer_constraints(5.0))[PEER]
+        if standing_rule:
+            assert kept.epsilon == pytest.approx(eps_0)
+            assert np.linalg.norm(kept.plan.position_at(6.0)[0] - straight(0.0)(5.0)) < 0.02  # where it stands
+        else:
+            assert kept.epsilon > eps_0 + 0.3
