@@ -108,11 +108,12 @@ def test_the_queue_is_bounded_and_drops_are_counted():
         assert wait_for(lambda: observer.alive.get(4))
         for seq in range(200):
             car.publish("trust", pose(4, seq))
-        # Trust reports go best effort: on a loaded machine a few may be lost on the way,
-        # so the bound is checked against what arrived (all 200 on a quiet one).
+        # Trust reports go best effort: on a loaded machine some are lost on the way (49 of
+        # 200 arrived with two bank jobs on the two cores), so the bound is checked against
+        # what arrived (all 200 on a quiet one): enough to overfill the queue twice.
         wait_for(lambda: observer.counters["received_trust"] >= 200, 5.0)
         received = observer.counters["received_trust"]
-        assert received > 100
+        assert received > 2 * 16
         assert len(observer.drain()) == 16
         assert observer.counters["dropped_queue_full"] == received - 16
 
