@@ -82,6 +82,7 @@ import bisect
 import dataclasses
 import logging
 import math
+import operator
 import time
 from collections import Counter, deque
 from collections.abc import Callable
@@ -618,8 +619,7 @@ def _acceleration_mismatch(view: PeerView, fresh_s: float, until: float) -> tupl
 def _nearest(velocities: deque, stamp: float) -> tuple[float, np.ndarray]:
     """The (t, v) of ``velocities`` (sorted by t: appended as seen) nearest ``stamp``, the
     earlier of two as near: ``min(velocities, key=|t - stamp|)`` by bisection."""
-    def t(tv):
-        return tv[0]
+    t = operator.itemgetter(0)
     right = bisect.bisect_left(velocities, stamp, key=t)
     if right == 0:
         return velocities[0]

@@ -94,13 +94,18 @@ def capped_below(x: float, y: float, yaw: float, radius_m: float,
     t_r = config.reaction_s
     if _cap_at(x, y, yaw, radius_m, list(others), config, safety, None, t_r) < speed:
         return True
-    return sdf is not None and stopping_speed(wall_room(x, y, yaw, sdf, radius_m + config.wall_clearance_m),
-                                              config, t_r) < speed
+    return sdf is not None and _wall_cap(x, y, yaw, radius_m, config, sdf, t_r) < speed
+
+
+def _wall_cap(x: float, y: float, yaw: float, radius_m: float, config: GuardConfig, sdf: SignedDistanceField,
+              t_r: float) -> float:
+    """The walls' term of the cap: stop before the ray ahead comes within the clearance."""
+    return stopping_speed(wall_room(x, y, yaw, sdf, radius_m + config.wall_clearance_m), config, t_r)
 
 
 def _cap_at(x: float, y: float, yaw: float, radius_m: float, others: list[tuple[float, float, float, float]],
             config: GuardConfig, safety: SafetyConfig, sdf: SignedDistanceField | None, t_r: float) -> float:
-    cap = math.inf if sdf is None else stopping_speed(wall_room(x, y, yaw, sdf, radius_m + config.wall_clearance_m), config, t_r)
+    cap = math.inf if sdf is None else _wall_cap(x, y, yaw, radius_m, config, sdf, t_r)
     cos_cone = math.cos(math.radians(config.cone_deg))
     c, s = math.cos(yaw), math.sin(yaw)
     for ox, oy, oyaw, oradius in others:
