@@ -68,12 +68,24 @@ def test_only_the_operators_page_stops_the_fleet_and_the_cars_stay_stopped_until
             page.wait_for_selector("#connection[data-state='connected']", timeout=20000)
             assert "token" not in page.url  # not left in the address bar
             assert fleet.moving(), fleet.states()
+            # The stop is timed from the click as the page got it (the event's own stamp), as
+            # an operator's mouse click would be: Playwright's checks before it dispatches
+            # (visible, stable, hit target: round trips into a page that shares two cores
+            # with the fleet) took 0.5-1.3 s of the 1 s once on a loaded CI machine, and no
+            # real mouse makes them. They are reported below, not bounded.
+            page.evaluate("""() => document.getElementById("estop").addEventListener("click",
+                e => { window.clickedAt = (performance.timeOrigin + e.timeStamp) / 1000; }, {capture: true})""")
             pressed = time.time()
             page.click("#estop")
+            clicked = page.evaluate("window.clickedAt")
             page.wait_for_selector("#operator-status[data-result='ok']", timeout=5000)
             assert wait_for(lambda: None not in fleet.held_since(pressed, fleet.ids).values(), 2.0)
             held = fleet.held_since(pressed, fleet.ids)
-            assert max(held.values()) - pressed < 1.0, held
+            answered = [t for t, what in page.evaluate("fetch('/api/snapshot').then(r => r.json())")
+                        ["source"]["operator"]["log"] if what.startswith("estop")]
+            hops = {"playwright_s": round(clicked - pressed, 3), "page_to_server_s": round(answered[-1] - clicked, 3),
+                    "server_to_cars_s": round(max(held.values()) - answered[-1], 3)}
+            assert pressed - 0.05 <= clicked and max(held.values()) - clicked < 1.0, (held, hops)
             assert fleet.wait_states({"e_stopped"}, timeout_s=3.0), fleet.states()
             time.sleep(1.0)
             assert fleet.held_since(pressed, fleet.ids) == held  # stays stopped
