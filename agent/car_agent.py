@@ -57,15 +57,18 @@ keep each car near its previous plan (a car does not flip sides between replans)
 cruise speed, so a car always intends to move on and waits only while someone is in
 its way (no car plans to wait for another that waits for it).
 
-Seen standing (``trust.standing_seen_s`` > 0; off by default): a peer we have seen stand
+Seen standing (``trust.standing_seen_s`` > 0; off by default): a distrusted peer (its
+transparency trust below a stranger's, TrustBook.distrusted) that we have seen stand
 still that long -- every observation of it within STANDING_SEEN_M of the newest, none
 older than ``stale_after_s`` -- is planned against where it stands, at eps_0 if its
-epsilon would be wider, whatever its trust or its plans say. Epsilon widens with
-distrust because a distrusted car may be elsewhere than it says; one seen standing is
-where it is seen, and from rest it closes a gap slowly: at the vehicle's 1.5 m/s^2,
-1/2 a t^2 = 0.05 m in the 0.25 s a replan and a frame take to see it go, a third of
-eps_0's 0.15 m beyond the breach distance -- no more than an honest car parked there
-could do unannounced; the guard is under both. The moment it moves the rule lets go.
+epsilon would be wider, whatever its plans say. Epsilon widens with distrust because a
+distrusted car may be elsewhere than it says; one seen standing is where it is seen, and
+from rest it closes a gap slowly: at the vehicle's 1.5 m/s^2, 1/2 a t^2 = 0.05 m in the
+0.25 s a replan and a frame take to see it go, a third of eps_0's 0.15 m beyond the
+breach distance -- no more than an honest car parked there could do unannounced; the
+guard is under both. The moment it moves the rule lets go. Peers not distrusted keep
+their plans and epsilons: an honest car waiting to go has announced when it goes, and
+taking it for one that stays threw that away (bottleneck-4 seed 25, a standoff).
 
 Kept plans (``verify.keep_s`` > 0; off by default): a replan may keep the current plan
 instead of optimising anew -- for at most ``keep_s`` after it was optimised, only while
@@ -313,7 +316,7 @@ class CarAgent:
                 if plan is None:
                     continue
                 self.counters["peers_predicted"] += 1
-            if trust.standing_seen_s > 0 and epsilon > self.epsilon_0(peer):
+            if trust.standing_seen_s > 0 and epsilon > self.epsilon_0(peer) and self.trust.distrusted(peer, now):
                 stands_at = self._seen_standing(peer, now)
                 if stands_at is not None:  # where it is seen, at eps_0 (module docstring, "Seen standing")
                     self.counters["peers_seen_standing"] += 1

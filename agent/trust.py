@@ -233,6 +233,13 @@ class TrustBook:
         """Overall trust: the weakest dimension."""
         return float(np.min(self.tau(peer, now)))
 
+    def distrusted(self, peer: int, now: float) -> bool:
+        """Whether ``peer``'s transparency trust is below a stranger's (the prior's
+        expected value): more evidence of false claims than of true ones. A new, silent or
+        little-known peer is not distrusted, only uncertain (a wide epsilon all the same)."""
+        c = self.config
+        return bool(self.tau(peer, now)[TRANSPARENCY] < expected(c.prior_alpha, c.prior_beta))
+
     def epsilon(self, peer: int, now: float, epsilon_0: float, transparency: bool) -> float:
         """The distance to keep from ``peer``: eps_0 * g(lower bound of transparency trust);
         with the transparency factor off, eps_0 * ``epsilon_gain_fixed`` from everyone."""

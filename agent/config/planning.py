@@ -171,11 +171,12 @@ class TrustConfig:
     """Of two cars closer than the breach distance, a car is blamed (a safety failure)
     only if it closes the gap faster than this: a car tailgated or stood still is not."""
     standing_seen_s: float = 0.0
-    """A peer seen standing still this long (every observation of it within STANDING_SEEN_M
-    of the newest; 0: off, at most the track's 2 s) is planned against where it stands at
-    no more than eps_0, whatever its trust or its plans say: from rest a car closes a
-    gap only slowly (1/2 a t^2), and the next replan sees it move (agent.car_agent,
-    "Seen standing"). A caught liar parked beside a goal otherwise closes it for good."""
+    """A distrusted peer (transparency trust below the prior's) seen standing still this
+    long (every observation of it within STANDING_SEEN_M of the newest; 0: off, at most
+    the track's 2 s) is planned against where it stands at no more than eps_0, whatever
+    its plans say: from rest a car closes a gap only slowly (1/2 a t^2), and the next
+    replan sees it move (agent.car_agent, "Seen standing"). A caught liar parked beside a
+    goal otherwise closes it for good."""
     epsilon_gain_fixed: float = 1.0
     """g for every peer when the transparency factor is off (planner.transparency = false):
     1 keeps eps_0 from everyone (the paper's baseline); a uniformly careful fleet (the

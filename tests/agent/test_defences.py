@@ -278,3 +278,22 @@ def test_a_caught_liar_seen_standing_is_kept_at_eps_0_where_it_stands_and_not_on
             assert np.linalg.norm(kept.plan.position_at(6.0)[0] - straight(0.0)(5.0)) < 0.02  # where it stands
         else:
             assert kept.epsilon > eps_0 + 0.3
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_an_honest_peer_seen_standing_keeps_its_epsilon_and_its_plan(intersection, intersection_sdf, seed,
+                                                                     monkeypatch):
+    """The rule acts on distrusted peers only: an honest car parked 1.5 s, still little
+    known (epsilon wider than eps_0, from the lower bound of its trust), is planned against
+    with its own plan and epsilon -- it may have announced that it leaves (bottleneck-4 seed
+    25 stood 18 s in a standoff when waiting honest cars were taken for cars that stay)."""
+    eps_0 = 0.45
+    seeing = replace(intersection, trust=replace(intersection.trust, standing_seen_s=1.0))
+    agent = watch(seeing, intersection_sdf, seed, speed=0.0, seconds=1.5)
+    now = 1.48
+    assert not agent.trust.distrusted(PEER, now)
+    wide = agent.trust.epsilon(PEER, now, eps_0, intersection.planner.transparency)
+    assert wide > eps_0 + 0.05
+    assert dict(agent.peer_constraints(now))[PEER].epsilon == pytest.approx(wide)
+    monkeypatch.setattr(type(agent.trust), "distrusted", lambda self, peer, now: True)  # the rule for anyone
+    assert dict(agent.peer_constraints(now))[PEER].epsilon == pytest.approx(eps_0)
