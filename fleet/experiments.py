@@ -235,14 +235,19 @@ def _job(task: tuple[str, Scenario, int]) -> tuple[dict, RunRecord]:
 
 
 def run_experiment(name: str, seeds: list[int], out: Path, jobs: int, scenario_file: str | None = None,
-                   figures: bool = True) -> dict:
+                   figures: bool = True, variants: tuple[str, ...] | None = None) -> dict:
+    """Run experiment ``name`` over ``seeds`` (``variants``: only these of its fleets; None: all)."""
     experiment = EXPERIMENTS[name]
+    unknown = sorted(set(variants or ()) - set(experiment.variants))
+    if unknown:
+        raise ValueError(f"experiment {name} has no variant {', '.join(unknown)} (it has {', '.join(experiment.variants)})")
     source = scenario_file or experiment.scenario_file
     base = load_scenario(source)
     results: dict[str, list[dict]] = {}
     records: dict[str, list[RunRecord]] = {}
     started = time.perf_counter()
-    tasks = [(variant, make(base), seed) for variant, make in experiment.variants.items() for seed in seeds]
+    tasks = [(variant, make(base), seed) for variant, make in experiment.variants.items()
+             if variants is None or variant in variants for seed in seeds]
     progress = Progress(f"{name}", len(tasks))
     for (variant, _, seed), (run, record) in parallel(_job, tasks, jobs):
         results.setdefault(variant, []).append(run)

@@ -33,7 +33,7 @@ def test_a_run_is_deterministic_per_seed(intersection):
 
 @pytest.mark.slow
 def test_proximity_factors_prevent_breaches_that_happen_without_them(out):
-    report = run_experiment("proximity", SEEDS, out, JOBS, figures=False)
+    report = run_experiment("proximity", SEEDS, out, JOBS, figures=False, variants=("on", "off"))
     on, off = report["variants"]["on"], report["variants"]["off"]
     assert all(not run["breaches"] for run in on)
     assert all(all(run["reached_goal"]) for run in on)
