@@ -57,7 +57,8 @@ keep each car near its previous plan (a car does not flip sides between replans)
 cruise speed, so a car always intends to move on and waits only while someone is in
 its way (no car plans to wait for another that waits for it).
 
-Seen standing (``trust.standing_seen_s`` > 0; off by default): a distrusted peer (its
+Seen standing (``trust.standing_seen_s`` > 0, 1 s by default; with the transparency factor
+on: the widening it undoes is trust's): a distrusted peer (its
 transparency trust below a stranger's, TrustBook.distrusted) that we have seen stand
 still that long -- every observation of it within STANDING_SEEN_M of the newest, none
 older than ``stale_after_s`` -- is planned against where it stands, at eps_0 if its
@@ -316,7 +317,8 @@ class CarAgent:
                 if plan is None:
                     continue
                 self.counters["peers_predicted"] += 1
-            if trust.standing_seen_s > 0 and epsilon > self.epsilon_0(peer) and self.trust.distrusted(peer, now):
+            if (trust.standing_seen_s > 0 and planner.transparency and epsilon > self.epsilon_0(peer)
+                    and self.trust.distrusted(peer, now)):
                 stands_at = self._seen_standing(peer, now)
                 if stands_at is not None:  # where it is seen, at eps_0 (module docstring, "Seen standing")
                     self.counters["peers_seen_standing"] += 1

@@ -170,10 +170,10 @@ class TrustConfig:
     blame_closing_mps: float = 0.05
     """Of two cars closer than the breach distance, a car is blamed (a safety failure)
     only if it closes the gap faster than this: a car tailgated or stood still is not."""
-    standing_seen_s: float = 0.0
+    standing_seen_s: float = 1.0
     """A distrusted peer (transparency trust below the prior's) seen standing still this
     long (every observation of it within STANDING_SEEN_M of the newest; 0: off, at most
-    the track's 2 s) is planned against where it stands at no more than eps_0, whatever
+    the track's 2 s; only with ``planner.transparency``, whose widening it undoes) is planned against where it stands at no more than eps_0, whatever
     its plans say: from rest a car closes a gap only slowly (1/2 a t^2), and the next
     replan sees it move (agent.car_agent, "Seen standing"). A caught liar parked beside a
     goal otherwise closes it for good."""

@@ -269,7 +269,8 @@ def test_a_caught_liar_seen_standing_is_kept_at_eps_0_where_it_stands_and_not_on
     lets go of a liar that drives."""
     attack, eps_0 = AttackConfig("displaced"), 0.45
     seeing = replace(intersection, trust=replace(intersection.trust, standing_seen_s=1.0))
-    for scenario, speed, standing_rule in ((seeing, 0.0, True), (intersection, 0.0, False), (seeing, 0.4, False)):
+    blind = replace(intersection, trust=replace(intersection.trust, standing_seen_s=0.0))
+    for scenario, speed, standing_rule in ((seeing, 0.0, True), (blind, 0.0, False), (seeing, 0.4, False)):
         agent = watch(scenario, intersection_sdf, seed, attack, speed=speed)
         assert transparency(agent, 5.0) < intersection.trust.tau_floor  # caught: distrusted
         kept = dict(agent.peer_constraints(5.0))[PEER]
