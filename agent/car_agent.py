@@ -58,8 +58,8 @@ cruise speed, so a car always intends to move on and waits only while someone is
 its way (no car plans to wait for another that waits for it).
 
 Seen standing (``trust.standing_seen_s`` > 0, 1 s by default; with the transparency factor
-on: the widening it undoes is trust's): a distrusted peer (its
-transparency trust below a stranger's, TrustBook.distrusted) that we have seen stand
+on, as the widening it undoes is trust's): a distrusted peer (its transparency trust
+below a stranger's, TrustBook.distrusted) that we have seen stand
 still that long -- every observation of it within STANDING_SEEN_M of the newest, none
 older than ``stale_after_s`` -- is planned against where it stands, at eps_0 if its
 epsilon would be wider, whatever its plans say. Epsilon widens with distrust because a

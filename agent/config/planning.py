@@ -173,10 +173,11 @@ class TrustConfig:
     standing_seen_s: float = 1.0
     """A distrusted peer (transparency trust below the prior's) seen standing still this
     long (every observation of it within STANDING_SEEN_M of the newest; 0: off, at most
-    the track's 2 s; only with ``planner.transparency``, whose widening it undoes) is planned against where it stands at no more than eps_0, whatever
-    its plans say: from rest a car closes a gap only slowly (1/2 a t^2), and the next
-    replan sees it move (agent.car_agent, "Seen standing"). A caught liar parked beside a
-    goal otherwise closes it for good."""
+    the track's 2 s) is planned against where it stands at no more than eps_0, whatever
+    its plans say -- with ``planner.transparency`` on, whose widening this undoes. From
+    rest a car closes a gap only slowly (1/2 a t^2), and the next replan sees it move
+    (agent.car_agent, "Seen standing"). A caught liar parked beside a goal otherwise
+    closes it for good."""
     epsilon_gain_fixed: float = 1.0
     """g for every peer when the transparency factor is off (planner.transparency = false):
     1 keeps eps_0 from everyone (the paper's baseline); a uniformly careful fleet (the

@@ -270,7 +270,12 @@ def test_a_caught_liar_seen_standing_is_kept_at_eps_0_where_it_stands_and_not_on
     attack, eps_0 = AttackConfig("displaced"), 0.45
     seeing = replace(intersection, trust=replace(intersection.trust, standing_seen_s=1.0))
     blind = replace(intersection, trust=replace(intersection.trust, standing_seen_s=0.0))
-    for scenario, speed, standing_rule in ((seeing, 0.0, True), (blind, 0.0, False), (seeing, 0.4, False)):
+    # The uniformly wide baseline (no transparency factor, 2 eps_0 from everyone): its
+    # epsilon is not trust's, and the rule leaves it alone.
+    wide = replace(seeing, planner=replace(intersection.planner, transparency=False),
+                   trust=replace(seeing.trust, epsilon_gain_fixed=2.0))
+    for scenario, speed, standing_rule in ((seeing, 0.0, True), (blind, 0.0, False), (seeing, 0.4, False),
+                                           (wide, 0.0, False)):
         agent = watch(scenario, intersection_sdf, seed, attack, speed=speed)
         assert transparency(agent, 5.0) < intersection.trust.tau_floor  # caught: distrusted
         kept = dict(agent.peer_constraints(5.0))[PEER]
