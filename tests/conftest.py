@@ -44,10 +44,93 @@ def wait_for(predicate, timeout: float = 5.0, interval: float = 0.01) -> bool:
     return predicate()
 
 
+# --- two workers: real time in one, simulated time beside it at the lowest priority -------
+
+COMPUTE_MODULES = (
+    "agent/test_attacks.py", "agent/test_car_agent.py", "agent/test_clocks.py", "agent/test_config.py",
+    "agent/test_deadlock.py", "agent/test_defences.py", "agent/test_factors.py",
+    "agent/test_first_false_claim.py", "agent/test_fleet_sim.py", "agent/test_gp.py", "agent/test_guard.py",
+    "agent/test_interval_kernel.py", "agent/test_kept_plans.py", "agent/test_lost_notice.py",
+    "agent/test_operation.py", "agent/test_planner.py", "agent/test_routes.py", "agent/test_safe_plan.py",
+    "agent/test_track.py", "agent/test_trust.py", "agent/test_trust_cache.py", "agent/test_verify.py",
+    "agent/test_world.py", "fleet/test_baselines.py", "fleet/test_bank.py", "fleet/test_pipeline.py",
+    "fleet/test_scenes.py", "fleet/test_stats.py", "fleet/test_trust_record.py", "fleet/test_car_report.py",
+    "bridge/test_natnet_frame.py", "bridge/test_natnet_model.py", "bridge/test_natnet_packet.py",
+    "bridge/test_natnet_properties.py", "bridge/test_natnet_coordinates.py", "bridge/test_natnet_handshake.py",
+    "bridge/test_carlink_codec.py", "bridge/test_carlink_properties.py", "bridge/test_carlink_receiver.py",
+    "bridge/test_carlink_v2.py", "bridge/test_drive.py", "bridge/test_motion_watch.py", "bridge/test_tracking.py",
+    "dashboard/test_state.py", "mocap_sim/test_vehicle.py", "test_cli.py",
+)
+"""Test modules whose outcome is simulated time and CPU alone: no socket, no process that
+keeps time, no clock read. Under pytest-xdist (``-n 2``, the README's command) they run in
+a worker of their own at the lowest CPU priority (nice 19), on the core the real-time
+tests leave idle (those keep 1.1 of 2 cores busy on average: fleets of car processes,
+browsers, network namespaces); every other module runs in the other worker, in order, at
+normal priority, as in a run without xdist."""
+
+COMPUTE, REAL_TIME = "compute", "real-time"
+WORKERS_DONE = "workers-done"
+"""A folder where each xdist worker leaves a file when its session ends: the leftover
+check waits for every other worker's."""
+
+
+def group_of(nodeid: str) -> str:
+    """The worker group of a test, from its module (``tests/agent/test_gp.py::...``)."""
+    module = nodeid.split("::")[0].removeprefix("tests/")
+    return COMPUTE if module in COMPUTE_MODULES else REAL_TIME
+
+
+@pytest.hookimpl(optionalhook=True)  # a hook of pytest-xdist, a test dependency
+def pytest_xdist_make_scheduler(config, log):
+    """With ``-n`` and xdist's default distribution: the two groups, each whole to one
+    worker (xdist's scope scheduling, scoped by group instead of by module)."""
+    if config.getvalue("dist") != "load":
+        return None
+    from xdist.scheduler import LoadScopeScheduling
+
+    class TwoGroups(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            return group_of(nodeid)
+
+    return TwoGroups(config, log)
+
+
 def pytest_collection_modifyitems(config, items):
     """The leftover check runs last, after every other test has cleaned up."""
     last = [item for item in items if item.nodeid.endswith("test_nothing_is_left_behind")]
     items[:] = [item for item in items if item not in last] + last
+
+
+def pytest_runtest_setup(item):
+    """An xdist worker that runs the compute group yields the CPU to the real-time one:
+    nice 19 (its child processes inherit it); without xdist nothing changes."""
+    if hasattr(item.config, "workerinput") and group_of(item.nodeid) == COMPUTE:
+        if os.getpriority(os.PRIO_PROCESS, 0) < 19:
+            os.setpriority(os.PRIO_PROCESS, 0, 19)
+
+
+def _workers_done_folder(config) -> Path | None:
+    """Beside the workers' own temporary folders (xdist gives each one in the run's
+    folder, which pytest deletes three runs later)."""
+    if getattr(config, "workerinput", None) is None or not config.option.basetemp:
+        return None
+    return Path(config.option.basetemp).parent / WORKERS_DONE
+
+
+def pytest_sessionfinish(session):
+    folder = _workers_done_folder(session.config)
+    if folder is not None:
+        folder.mkdir(exist_ok=True)
+        (folder / session.config.workerinput["workerid"]).touch()
+
+
+def other_workers_done(config) -> bool:
+    """True once every other xdist worker's session has ended (always, without xdist)."""
+    folder = _workers_done_folder(config)
+    if folder is None:
+        return True
+    others = {f"gw{k}" for k in range(config.workerinput["workercount"])} - {config.workerinput["workerid"]}
+    return all((folder / name).exists() for name in others)
 
 
 def trustfg_processes() -> list[str]:

@@ -5,13 +5,16 @@ from tests.conftest import (
     FIRST_HELD_AFTER,
     bound_ports,
     left_behind,
+    other_workers_done,
     port_owners,
     trustfg_processes,
     wait_for,
 )
 
 
-def test_nothing_is_left_behind():
+def test_nothing_is_left_behind(pytestconfig):
+    # under xdist, after the other worker's last test too (the compute group takes 6-8 min)
+    assert wait_for(lambda: other_workers_done(pytestconfig), 1800.0, interval=0.5), "another xdist worker never finished"
     assert wait_for(lambda: not left_behind(), 10.0), left_behind()
     left = lambda: bound_ports() - BOUND_AT_START  # noqa: E731
     assert wait_for(lambda: not left(), 10.0), {port: (owners, "first held by pytest after " + FIRST_HELD_AFTER.get(port, "-"))
@@ -62,3 +65,13 @@ def test_the_check_sees_a_leftover_command_loop_by_its_name():
     finally:
         probe.kill()
         probe.wait()
+
+
+def test_every_module_of_the_compute_group_exists():
+    """A renamed module would fall back to the real-time worker unnoticed (safe, but slow)."""
+    from pathlib import Path
+
+    from tests.conftest import COMPUTE_MODULES
+
+    here = Path(__file__).parent
+    assert [name for name in COMPUTE_MODULES if not (here / name).is_file()] == []
