@@ -1,5 +1,6 @@
 """Shared test helpers: scenarios and their distance fields, free ports, multicast groups,
-waiting on conditions, and the leftover checks (processes, ports) the last test runs."""
+waiting on conditions, the leftover checks (processes, ports) the last test runs, and the
+suite's split into two xdist workers (real time, and simulated time at nice 19)."""
 
 from __future__ import annotations
 

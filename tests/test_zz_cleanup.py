@@ -13,7 +13,7 @@ from tests.conftest import (
 
 
 def test_nothing_is_left_behind(pytestconfig):
-    # under xdist, after the other worker's last test too (the compute group takes 6-8 min)
+    # under xdist, after the other worker's last test too (its group may end after this one)
     assert wait_for(lambda: other_workers_done(pytestconfig), 1800.0, interval=0.5), "another xdist worker never finished"
     assert wait_for(lambda: not left_behind(), 10.0), left_behind()
     left = lambda: bound_ports() - BOUND_AT_START  # noqa: E731
