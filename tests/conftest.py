@@ -63,7 +63,7 @@ COMPUTE_MODULES = (
     "dashboard/test_state.py", "mocap_sim/test_vehicle.py", "test_cli.py",
 )
 """Test modules whose outcome is simulated time and CPU alone: no socket, no process that
-keeps time, no clock read. Under pytest-xdist (``-n 2``, the README's command) they run in
+keeps time, no clock read. Under pytest-xdist (``pytest -n 2``) they run in
 a worker of their own at the lowest CPU priority (nice 19), on the core the real-time
 tests leave idle (those keep 1.1 of 2 cores busy on average: fleets of car processes,
 browsers, network namespaces); every other module runs in the other worker, in order, at
