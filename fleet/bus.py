@@ -424,7 +424,8 @@ class FleetBus:
                     log.debug("undeclare: %s", exc)
             try:
                 session.close()
-            except Exception as exc:
+            except Exception as exc:  # Zenoh gives up after 10 s of its own (a peer that stopped reading)
+                self.counters["close_failed"] += 1
                 log.warning("closing the Zenoh session: %s", exc)
 
         closer = threading.Thread(target=close_all, name="zenoh-close", daemon=True)

@@ -259,6 +259,7 @@ def measure(case: Case, summary: dict, out: Path) -> dict:
         "honest_trust_min": min((v for r in summary["trust"] for v in r if v is not None), default=None),
         "wall_clearance_m": summary["obstacle_min_clearance"],
         "trust_after_3s": summary.get("honest_trust_min_after_settle"),
+        "observer_close": summary.get("observer_close"),
     }
     events = summary.get("events", [])
     fault = next((t for t, what in events if what.startswith("fault:")), None)

@@ -262,6 +262,12 @@ def run(scenario: Scenario, out: Path, seed: int = 0, timeout_s: float | None = 
                 bus.close(timeout_s=END_CLOSE_TIMEOUT_S)
         processes.stop()
         summary = summarise(final_legs(scenario), out, recorder, t_go, crashed_early)
+        # A close that failed may leave the observer's listener open in this process (it
+        # goes with the process; a caller that runs on, like a test, should know)
+        summary["observer_close"] = {name: bus.counters[name] for name in ("close_timed_out", "close_failed")}
+        if any(summary["observer_close"].values()):
+            print(f"trustfg sim: the observer's Zenoh session did not close cleanly: {summary['observer_close']}",
+                  file=sys.stderr, flush=True)
         summary["cpu"] = processes.cpu.summary("go", "first_arrival")
         summary["t_go"] = t_go  # the go, on the clock of the messages' stamps (None: no go)
     finally:
