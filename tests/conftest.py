@@ -237,7 +237,23 @@ leftover in the suite's own process then names the test that opened it."""
 def _note_own_listeners(request):
     yield
     for port in own_listeners():
-        FIRST_HELD_AFTER.setdefault(port, request.node.nodeid)
+        if port not in FIRST_HELD_AFTER:
+            FIRST_HELD_AFTER[port] = f"{request.node.nodeid} (threads then: {_threads_now()})"
+
+
+def _threads_now() -> str:
+    """This process's threads by name, with where a Zenoh close hangs, if one does."""
+    import sys
+    import threading
+    import traceback
+
+    frames = sys._current_frames()
+    said = []
+    for thread in threading.enumerate():
+        said.append(thread.name)
+        if thread.name == "zenoh-close" and thread.ident in frames:
+            said.append("  " + " <- ".join(f"{f.name}:{f.lineno}" for f in traceback.extract_stack(frames[thread.ident])[-3:]))
+    return ", ".join(said)
 
 
 def _readlink(path: Path) -> str:

@@ -4,10 +4,14 @@ Needs root (ip netns, nftables): skipped with the reason otherwise. The expectat
 those of the faults issue; fleet/faults.py documents how each number is measured.
 """
 
+import json
+import subprocess
+import sys
+
 import pytest
 
 from trustfg.fleet import netem
-from trustfg.fleet.faults import CASES, run_case
+from trustfg.fleet.faults import CASES
 
 pytestmark = [pytest.mark.faults,
               pytest.mark.skipif(netem.available() is not None, reason=str(netem.available()))]
@@ -32,10 +36,37 @@ SUBSUMED = {
 case costs about 20 s of the suite's 15-minute budget."""
 
 
+CASE_TIMEOUT_S = 300.0
+"""A case takes 20-40 s; this only bounds a hung one."""
+
+
+def run_as_a_lab_does(name: str, out) -> dict:
+    """One run of case ``name`` (seed 0) by ``trustfg faults``, in a process of its own as
+    a lab runs it: what its Zenoh sessions hold goes with it. (Run in the test's own
+    process, a TCP listener was left open after `link-cut-entry` until the suite's end, in
+    one of five two-worker runs: most likely the run's observer session, whose close Zenoh
+    gives up on after 10 s when a peer stops reading -- fleet.bus counts that,
+    ``observer_close`` in the row.)"""
+    command = [sys.executable, "-m", "trustfg", "faults", "--cases", name, "--seeds", "1", "--out", str(out)]
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        stdout, stderr = process.communicate(timeout=CASE_TIMEOUT_S)
+    finally:
+        if process.poll() is None:  # SIGTERM unwinds: its namespaces, rules and processes go
+            process.terminate()
+            try:
+                process.wait(30)
+            except subprocess.TimeoutExpired:
+                process.kill()
+                process.wait()
+    assert process.returncode == 0, f"trustfg faults exited {process.returncode}:\n{stderr[-4000:]}"
+    return json.loads((out / "faults.json").read_text())[0]
+
+
 @pytest.mark.parametrize("name", [name for name in CASES if name not in SUBSUMED])
 def test_fault(name, tmp_path):
     case = CASES[name]
-    row = run_case(case, seed=0, out=tmp_path / name)
+    row = run_as_a_lab_does(name, tmp_path / name)
     print(f"row: {row}")  # whole, on a failure (an assertion's message is cut at 240 characters)
     assert row["crashed"] == [], row
     assert row["breaches"] == 0, row
