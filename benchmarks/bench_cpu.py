@@ -11,6 +11,13 @@ core is its CPU time over that window divided by the window's wall time. Printed
 scene: the mean, min and max over the car processes, and the sum over every process of
 the run (mocap-sim, the launcher and the cars) against the machine's cores -- near the
 core count the cars were starved and their shares are capped, not their demand.
+
+Then where a car's CPU goes while it drives (each car's own window, from its departure
+to its arrival: ``cpu_driving`` in the car's ``--stats``, fleet.cpu.breakdown), as shares
+of one core averaged over the cars: the main thread by section of its loop (replan,
+evidence, messages in, frames, publishing, feeding the command loop, the loop's own
+passes and waits), the car process's other threads (the NatNet client's socket thread,
+Zenoh's), and the command loop process (its ticks, its own NatNet client).
 """
 
 from __future__ import annotations
@@ -43,6 +50,29 @@ def main() -> None:
         p95 = max(r["p95"] for r in summary["replan_ms"].values() if r)
         print(f"{scenario.name:>16} {len(cars) - 1:>5} {statistics.mean(cars):>6.3f} {min(cars):>6.3f} "
               f"{max(cars):>6.3f} {total:>14.2f} {p95:>14.1f}")
+        print_breakdown(summary)
+
+
+def print_breakdown(summary: dict) -> None:
+    """The mean over the cars of each part's share of one core while the car drove."""
+    parts: dict[str, list[float]] = {}
+    for entry in summary.get("cpu_driving", {}).values():
+        if not entry or not entry["wall_s"] > 0:
+            continue
+        wall = entry["wall_s"]
+        shares = {f"main: {name}": cpu / wall for name, cpu in entry["sections"].items()}
+        shares |= {f"thread: {name}": cpu / wall for name, cpu in entry["threads"].items()}
+        shares |= {f"command loop: {name}": cpu / wall for name, cpu in entry["command_loop"].items()}
+        for name, value in shares.items():
+            parts.setdefault(name, []).append(value)
+    if not parts:
+        print("    (no car drove: no breakdown)")
+        return
+    total = sum(statistics.mean(v) for k, v in parts.items() if not k.startswith("main: "))  # sections: of main
+    print(f"    while driving, share of one core, mean over {len(next(iter(parts.values())))} cars: "
+          f"{total:.3f} in all")
+    for name in sorted(parts, key=lambda k: -statistics.mean(parts[k])):
+        print(f"    {name:>28} {statistics.mean(parts[name]):6.3f}")
 
 
 if __name__ == "__main__":

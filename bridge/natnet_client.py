@@ -254,6 +254,12 @@ class NatNetClient:
         return self._receiver.version if self._receiver else None
 
     @property
+    def thread_id(self) -> int | None:
+        """The OS id of the socket thread (for its CPU time in /proc); None before start."""
+        thread = self._thread
+        return thread.native_id if thread is not None else None
+
+    @property
     def local_address(self) -> tuple[str, int] | None:
         sock = self._sock
         return sock.getsockname() if sock is not None else None

@@ -44,6 +44,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
+import os
 import threading
 import time
 from collections import Counter, deque
@@ -65,6 +66,7 @@ from .car_report import WaitingLog, status_counters, waiting_for, write_stats
 from .command import command_parser, configured, stop_on_signals
 from .command_loop import Report
 from .command_process import CommandProcess
+from .cpu import Sections, Snapshot, breakdown, snapshot
 from .keys import HEARD_BY_CARS
 from .laps import Laps
 
@@ -114,6 +116,10 @@ class CarProcess:
         self._on_bus: dict[int, bool] = {}
         """Peers on the bus by token or, a token lost by Zenoh, by hearing (FleetBus.on_bus)."""
         self.laps = Laps(car, scenario.control.laps, scenario.control.lap_turn_s)
+        self.sections = Sections()
+        """The main thread's CPU by section of its loop (fleet.cpu)."""
+        self._driving_cpu: list[Snapshot] = []
+        """Snapshots as the car starts to drive and as it stops (its first trial)."""
 
     def _new_agent(self) -> CarAgent:
         """A fresh mind: a car plans every trial anew (``CarAgent.carry_over`` keeps what it
@@ -230,6 +236,7 @@ class CarProcess:
                 self._main_loop(bus)
         finally:
             self.stop.set()
+            self._watch_driving_cpu(stopping=True)  # while the command loop is there to read
             self.command.close()  # STOP datagrams before anything else
             connector.join(timeout=self.natnet.connect_timeout_s + 1.0)
             self.state = "stopped"
@@ -295,11 +302,15 @@ class CarProcess:
         next_pose = now
         next_status = now
         next_say = now + 1.0
+        book = self.sections.book
         while not self.stop.is_set():
             now = self.clock()
+            book("loop")
             self._observe_frames()
+            book("frames")
             for received in bus.drain():
                 self._handle(received)
+            book("messages")
             for peer, up in list(bus.alive.items()):
                 if not up and self._alive.get(peer, True):
                     log.warning("car %d: car %d left the bus", self.car.id, peer)
@@ -309,14 +320,19 @@ class CarProcess:
                     and now - started_wait > control.start_timeout_s):
                 log.warning("car %d: no start message for %.0f s; starting now", self.car.id, control.start_timeout_s)
                 self._start(None)
+            book("loop")
             self._feed_command_loop(now)
+            book("command_loop")
             self.agent.gather_evidence(now)
+            book("evidence")
             if now >= next_replan:
                 next_replan += control.replan_period_s
                 if now - next_replan > control.replan_period_s:
                     next_replan = now + control.replan_period_s  # do not try to catch up
                 self._replan(now)
+                book("replan")
                 self._feed_command_loop(self.clock())
+                book("command_loop")
                 next_plan = now + control.plan_period_s
                 self._publish_plan(bus, now, repeat=False)  # a new plan goes out at once, both ways
             if now >= next_plan:  # and again every plan_period_s, best effort: a lost plan is soon replaced
@@ -328,6 +344,7 @@ class CarProcess:
             if now >= next_pose:
                 next_pose = max(next_pose + control.pose_period_s, now)
                 self._publish_pose(bus, now)
+            book("publish")
             state = self._state()
             if now >= next_status or state != self.state:  # a new mode is told at once
                 self.state = state
@@ -337,11 +354,29 @@ class CarProcess:
                 next_say = now + 1.0
                 self._on_bus = bus.on_bus()
                 self._waiting.say(self.state, self.waiting_for(now), now)
+            self._watch_driving_cpu()
+            book("status")
             # Until the next thing due (a message wakes it at once), at most a command
             # period: the permit, the deadman and the operator's flags are looked at in each pass.
             due = min(next_replan, next_plan, next_trust, next_pose, next_status, next_say,
                       self.agent.next_evidence_at())
             bus.wait(min(max(due - self.clock(), 0.0), 1.0 / control.command_rate_hz))
+            book("wait")
+
+    def _watch_driving_cpu(self, stopping: bool = False) -> None:
+        """Snapshots of the car's CPU (fleet.cpu) as it starts to drive and as it stops
+        driving (arrived, or the process ``stopping``), its first trial's: what a driving
+        car costs, in the ``--stats`` summary."""
+        driving = self.operation.mode == Mode.DRIVING and not stopping
+        if driving and not self._driving_cpu or not driving and len(self._driving_cpu) == 1:
+            self._driving_cpu.append(snapshot(self.sections, os.getpid(), self.command.pid))
+
+    def driving_cpu(self) -> dict | None:
+        """Where the car's CPU went while it drove (fleet.cpu.breakdown); None if it did not."""
+        if len(self._driving_cpu) < 2:
+            return None
+        natnet = self._natnet.thread_id if self._natnet is not None else None
+        return breakdown(*self._driving_cpu, threading.main_thread().native_id, natnet)
 
     def _state(self) -> str:
         mode = self.operation.mode

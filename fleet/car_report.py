@@ -158,5 +158,6 @@ def write_stats(path: Path, process: Any, bus: FleetBus | None) -> None:
                    "rejected": dict(nat.rejected)} if nat is not None else None,
         "link_sent": process.command.link.get("link_sent"),
         "link_answers": process.command.link.get("link_answers"),
+        "cpu_driving": process.driving_cpu(),
     }
     path.write_text(json.dumps(stats, indent=1))

@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import os
 import time
+from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 CLOCK_TICKS_PER_S = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
@@ -48,6 +50,23 @@ def read_ticks(pid: int, children: bool = False) -> int | None:
     if children:
         for child in child_pids(pid):
             ticks += read_ticks(child, children=True) or 0
+    return ticks
+
+
+def read_thread_ticks(pid: int) -> dict[int, int]:
+    """utime + stime of every live thread of a process, clock ticks by thread id (empty if
+    it is gone)."""
+    ticks = {}
+    try:
+        tasks = os.listdir(f"/proc/{pid}/task")
+    except OSError:
+        return ticks
+    for task in tasks:
+        try:
+            with open(f"/proc/{pid}/task/{task}/stat") as f:
+                ticks[int(task)] = parse_stat_ticks(f.read())
+        except (OSError, ValueError):
+            continue  # the thread ended between the listing and the read
     return ticks
 
 
@@ -130,3 +149,64 @@ class CpuMeter:
 
 def _rounded(value: float | None) -> float | None:
     return None if value is None else round(value, 4)
+
+
+@dataclass
+class Sections:
+    """CPU time of one thread by section of a loop: ``book(name)`` books the thread's CPU
+    time since the previous booking to ``name``."""
+
+    clock: Callable[[], float] = time.thread_time
+    cpu_s: Counter = field(default_factory=Counter)
+    _last: float | None = None
+
+    def book(self, name: str) -> None:
+        now = self.clock()
+        if self._last is not None:
+            self.cpu_s[name] += now - self._last
+        self._last = now
+
+
+@dataclass(frozen=True)
+class Snapshot:
+    """One moment of a car's CPU: its main loop's sections and the kernel's per-thread counts
+    of the car process and of its command loop (fleet.command_loop)."""
+
+    t: float
+    """Wall time, seconds (monotonic)."""
+    sections: dict[str, float]
+    threads: dict[int, int]
+    loop_pid: int | None
+    loop_threads: dict[int, int]
+
+
+def snapshot(sections: Sections, pid: int, loop_pid: int | None, clock=time.monotonic) -> Snapshot:
+    return Snapshot(clock(), dict(sections.cpu_s), read_thread_ticks(pid), loop_pid,
+                    read_thread_ticks(loop_pid) if loop_pid is not None else {})
+
+
+def breakdown(a: Snapshot, b: Snapshot, main_tid: int, natnet_tid: int | None) -> dict:
+    """Where a car's CPU went between two snapshots, in seconds of CPU over ``wall_s``:
+    ``sections`` of the main thread (what it spent before its first booking is not in
+    them); ``threads`` of the car process: ``main``, ``natnet`` (the NatNet
+    client's socket thread) and ``other`` (Zenoh's and the rest); ``command_loop``:
+    ``main`` (its ticks) and ``other`` (its own NatNet client), zero when the loop was not
+    the same process at both ends (it died and was restarted). A thread that ended within
+    the window is not counted (a running car keeps its threads)."""
+    def grown(before: dict[int, int], after: dict[int, int], tids) -> float:
+        return round(sum(after[t] - before.get(t, 0) for t in tids if t in after) / CLOCK_TICKS_PER_S, 3)
+
+    threads = b.threads
+    named = {main_tid} | ({natnet_tid} if natnet_tid is not None else set())
+    loop_pid = a.loop_pid if a.loop_pid == b.loop_pid else None
+    loop = b.loop_threads if loop_pid is not None else {}
+    return {
+        "wall_s": round(b.t - a.t, 3),
+        "sections": {name: round(b.sections.get(name, 0.0) - a.sections.get(name, 0.0), 4)
+                     for name in sorted(b.sections)},
+        "threads": {"main": grown(a.threads, threads, [main_tid]),
+                    "natnet": grown(a.threads, threads, [natnet_tid] if natnet_tid is not None else []),
+                    "other": grown(a.threads, threads, [t for t in threads if t not in named])},
+        "command_loop": {"main": grown(a.loop_threads, loop, [loop_pid]) if loop else 0.0,
+                         "other": grown(a.loop_threads, loop, [t for t in loop if t != loop_pid])},
+    }

@@ -5,7 +5,18 @@ import time
 
 import pytest
 
-from trustfg.fleet.cpu import CLOCK_TICKS_PER_S, CpuMeter, Read, parse_stat_ticks, read_ticks, share
+from trustfg.fleet.cpu import (
+    CLOCK_TICKS_PER_S,
+    CpuMeter,
+    Read,
+    Sections,
+    Snapshot,
+    breakdown,
+    parse_stat_ticks,
+    read_thread_ticks,
+    read_ticks,
+    share,
+)
 
 # A real /proc/PID/stat line shape (proc(5)), with a command name holding ') (' and spaces.
 STAT = ("4242 (trustfg car) (1)) S 1 4242 4242 0 -1 4194560 2810 0 0 0 "
@@ -65,3 +76,49 @@ def test_a_process_read_with_its_children_counts_what_they_burn():
     finally:
         child.stdin.close()
         child.wait()
+
+
+def test_sections_book_the_cpu_since_the_last_booking():
+    readings = iter([1.0, 1.5, 1.75, 3.0])
+    sections = Sections(clock=lambda: next(readings))
+    sections.book("wait")  # the first booking starts the watch: nothing before it is booked
+    sections.book("replan")
+    sections.book("wait")
+    sections.book("replan")
+    assert sections.cpu_s == {"replan": 0.5 + 1.25, "wait": 0.25}
+
+
+def test_a_thread_burning_cpu_shows_under_its_own_id():
+    import threading
+
+    ids = {}
+
+    def burn():
+        ids["tid"] = threading.get_native_id()
+        until = time.thread_time() + 0.3
+        while time.thread_time() < until:
+            pass
+        ids["ticks"] = read_thread_ticks(os.getpid())
+
+    thread = threading.Thread(target=burn)
+    thread.start()
+    thread.join()
+    assert ids["ticks"][ids["tid"]] >= 0.25 * CLOCK_TICKS_PER_S
+    assert threading.get_native_id() in read_thread_ticks(os.getpid())
+    assert read_thread_ticks(2**22 + 12345) == {}
+
+
+def test_breakdown_splits_a_car_into_its_threads_and_its_command_loop():
+    hz = CLOCK_TICKS_PER_S
+    # car process: main thread 10, NatNet 11, a Zenoh thread 12, a thread born within the window 13
+    a = Snapshot(100.0, {"replan": 1.0, "wait": 0.1}, {10: 5 * hz, 11: hz, 12: hz}, 20, {20: hz, 21: hz})
+    b = Snapshot(110.0, {"replan": 1.8, "wait": 0.2, "evidence": 0.3},
+                 {10: 6 * hz, 11: hz + hz // 2, 12: hz + hz // 4, 13: hz // 4}, 20, {20: 2 * hz, 21: hz + hz // 2})
+    out = breakdown(a, b, main_tid=10, natnet_tid=11)
+    assert out["wall_s"] == 10.0
+    assert out["sections"] == {"evidence": 0.3, "replan": 0.8, "wait": 0.1}
+    assert out["threads"] == {"main": 1.0, "natnet": 0.5, "other": 0.5}
+    assert out["command_loop"] == {"main": 1.0, "other": 0.5}
+    restarted = Snapshot(110.0, b.sections, b.threads, 30, {30: hz})  # the loop died and came back
+    assert breakdown(a, restarted, 10, 11)["command_loop"] == {"main": 0.0, "other": 0.0}
+    assert breakdown(a, b, 10, None)["threads"] == {"main": 1.0, "natnet": 0.0, "other": 1.0}

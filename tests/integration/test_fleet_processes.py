@@ -46,6 +46,12 @@ def test_four_car_processes_reach_their_goals_without_breach(honest):
         # Its CPU, from /proc: a planning car is busy, but far from a whole core.
         cpu = summary["cpu"][f"car {car}"]
         assert 0.01 < cpu["share"] < 1.0 and cpu["share_go_first_arrival"] > 0.01, cpu
+        # Where it went while the car drove: every part that works while it drives shows.
+        driving = summary["cpu_driving"][car]
+        assert driving["wall_s"] > 1.0, driving
+        assert driving["sections"]["replan"] > 0 and driving["sections"]["messages"] > 0, driving
+        assert driving["threads"]["main"] >= sum(driving["sections"].values()) - 0.05, driving
+        assert driving["command_loop"]["main"] > 0 and driving["threads"]["natnet"] > 0, driving
     assert summary["cpu"]["mocap-sim"]["cpu_s"] > 0 and summary["cpu"]["launcher"]["cpu_s"] > 0
 
 
