@@ -27,6 +27,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import logging
+import os
 import socket
 import subprocess
 import sys
@@ -269,6 +270,7 @@ def run(scenario: Scenario, out: Path, seed: int = 0, timeout_s: float | None = 
             print(f"trustfg sim: the observer's Zenoh session did not close cleanly: {summary['observer_close']}",
                   file=sys.stderr, flush=True)
         summary["cpu"] = processes.cpu.summary("go", "first_arrival")
+        summary["machine"] = machine_load(summary["cpu"], os.cpu_count() or 1)
         summary["t_go"] = t_go  # the go, on the clock of the messages' stamps (None: no go)
     finally:
         processes.stop()
@@ -279,6 +281,18 @@ def run(scenario: Scenario, out: Path, seed: int = 0, timeout_s: float | None = 
     return summary
 
 
+
+
+SATURATED = 0.9
+"""A run whose processes took this share of the machine's cores from the go to the first
+arrival was starved: its replan times and arrivals measure the machine, not the planner."""
+
+
+def machine_load(cpu: dict[str, dict | None], cores: int) -> dict:
+    """How busy the run kept the machine from the go to the first arrival: ``busy_cores``
+    (the processes' shares of one core, summed), ``cores``, and ``saturated``."""
+    busy = sum((entry or {}).get("share_go_first_arrival") or 0.0 for entry in cpu.values())
+    return {"busy_cores": round(busy, 2), "cores": cores, "saturated": busy >= SATURATED * cores}
 
 
 def _port_free(port: int) -> bool:

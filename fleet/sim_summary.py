@@ -159,6 +159,11 @@ def print_summary(summary: dict) -> None:
     print("cpu (share of one core, whole run / go to first arrival): " + "  ".join(
         f"{name}: {c['share']}/{c.get('share_go_first_arrival')}" if c else f"{name}: -"
         for name, c in summary.get("cpu", {}).items()))
+    machine = summary.get("machine")
+    if machine and machine["saturated"]:
+        print(f"the machine was saturated: the processes took {machine['busy_cores']} of its {machine['cores']} "
+              "cores from the go to the first arrival, so the cars were starved -- replan times, lapsed "
+              "permits and arrivals measure the machine here, not the planner")
     print(f"messages: {summary['messages']}")
     if "liar_id" in summary:
         print(f"liars {summary['liar_ids']}: min distance from honest cars {summary['liar_min_distance']}, "

@@ -122,3 +122,13 @@ def test_breakdown_splits_a_car_into_its_threads_and_its_command_loop():
     restarted = Snapshot(110.0, b.sections, b.threads, 30, {30: hz})  # the loop died and came back
     assert breakdown(a, restarted, 10, 11)["command_loop"] == {"main": 0.0, "other": 0.0}
     assert breakdown(a, b, 10, None)["threads"] == {"main": 1.0, "natnet": 0.0, "other": 1.0}
+
+
+def test_a_run_that_fills_the_cores_is_called_saturated():
+    from trustfg.fleet.launch import machine_load
+
+    cpu = {"launcher": {"share_go_first_arrival": 0.05}, "mocap-sim": {"share_go_first_arrival": 0.1},
+           **{f"car {i}": {"share_go_first_arrival": 0.22} for i in range(1, 9)}, "car 9": None}
+    assert machine_load(cpu, 2) == {"busy_cores": 1.91, "cores": 2, "saturated": True}
+    assert machine_load(cpu, 4)["saturated"] is False
+    assert machine_load({"car 1": {"share_go_first_arrival": None}}, 2)["busy_cores"] == 0.0  # no go: no window

@@ -53,6 +53,8 @@ def test_four_car_processes_reach_their_goals_without_breach(honest):
         assert driving["threads"]["main"] >= sum(driving["sections"].values()) - 0.05, driving
         assert driving["command_loop"]["main"] > 0 and driving["threads"]["natnet"] > 0, driving
     assert summary["cpu"]["mocap-sim"]["cpu_s"] > 0 and summary["cpu"]["launcher"]["cpu_s"] > 0
+    machine = summary["machine"]
+    assert machine["cores"] >= 1 and 0.0 < machine["busy_cores"] <= machine["cores"] + 0.1, machine
 
 
 def test_a_skewed_clock_is_seen_and_forgiven(honest):
