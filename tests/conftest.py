@@ -7,7 +7,10 @@ from __future__ import annotations
 import itertools
 import os
 import socket
+import sys
+import threading
 import time
+import traceback
 from pathlib import Path
 
 import pytest
@@ -243,10 +246,6 @@ def _note_own_listeners(request):
 
 def _threads_now() -> str:
     """This process's threads by name, with where a Zenoh close hangs, if one does."""
-    import sys
-    import threading
-    import traceback
-
     frames = sys._current_frames()
     said = []
     for thread in threading.enumerate():

@@ -59,7 +59,7 @@ def run_as_a_lab_does(name: str, out) -> dict:
             except subprocess.TimeoutExpired:
                 process.kill()
                 process.wait()
-    assert process.returncode == 0, f"trustfg faults exited {process.returncode}:\n{stderr[-4000:]}"
+    assert process.returncode == 0, f"trustfg faults exited {process.returncode}:\n{stdout[-2000:]}\n{stderr[-4000:]}"
     return json.loads((out / "faults.json").read_text())[0]
 
 
