@@ -270,7 +270,7 @@ def run(scenario: Scenario, out: Path, seed: int = 0, timeout_s: float | None = 
             print(f"trustfg sim: the observer's Zenoh session did not close cleanly: {summary['observer_close']}",
                   file=sys.stderr, flush=True)
         summary["cpu"] = processes.cpu.summary("go", "first_arrival")
-        summary["machine"] = machine_load(summary["cpu"], os.cpu_count() or 1)
+        summary["machine"] = machine_load(summary["cpu"], usable_cores())
         summary["t_go"] = t_go  # the go, on the clock of the messages' stamps (None: no go)
     finally:
         processes.stop()
@@ -293,6 +293,14 @@ def machine_load(cpu: dict[str, dict | None], cores: int) -> dict:
     (the processes' shares of one core, summed), ``cores``, and ``saturated``."""
     busy = sum((entry or {}).get("share_go_first_arrival") or 0.0 for entry in cpu.values())
     return {"busy_cores": round(busy, 2), "cores": cores, "saturated": busy >= SATURATED * cores}
+
+
+def usable_cores() -> int:
+    """The cores this process may run on (its affinity: a container or taskset may allow
+    fewer than the machine has)."""
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
 
 
 def _port_free(port: int) -> bool:
