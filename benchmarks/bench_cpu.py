@@ -45,9 +45,14 @@ def main() -> None:
         with tempfile.TemporaryDirectory() as folder:
             summary = run(scenario, Path(folder), seed=args.seed)
         window = "share_go_first_arrival"
-        cars = [summary["cpu"][f"car {i}"][window] for i in summary["car_ids"]]
-        total = sum(entry[window] or 0.0 for entry in summary["cpu"].values() if entry)
-        p95 = max(r["p95"] for r in summary["replan_ms"].values() if r)
+        entries = [summary["cpu"].get(f"car {i}") or {} for i in summary["car_ids"]]
+        if any(entry.get(window) is None for entry in entries):  # no car arrived: no such window
+            window = "share"
+            print(f"    {scenario.name}: no car arrived (or a car process was not read): "
+                  "shares over the whole run instead")
+        cars = [entry.get(window) or 0.0 for entry in entries]
+        total = sum(entry.get(window) or 0.0 for entry in summary["cpu"].values() if entry)
+        p95 = max((r["p95"] for r in summary["replan_ms"].values() if r), default=float("nan"))
         print(f"{scenario.name:>16} {len(cars) - 1:>5} {statistics.mean(cars):>6.3f} {min(cars):>6.3f} "
               f"{max(cars):>6.3f} {total:>14.2f} {p95:>14.1f}")
         print_breakdown(summary)
