@@ -9,6 +9,11 @@ time between two reads: 1.0 is one core busy all the time, 2.0 two cores.
 first read, the last read and named marks (e.g. the go and the first arrival), so a
 process that dies early still has the reads it had; ``summary()`` turns them into shares.
 Parsing is pure (:func:`parse_stat_ticks`), reading is a thin wrapper around it.
+
+Inside a car process: :class:`Sections` books its main thread's CPU time to the section of
+the loop it was spent in, and :func:`snapshot` / :func:`breakdown` turn two moments of
+that and of the kernel's per-thread counts (the process's and its command loop's) into
+where the car's CPU went between them (fleet.car_process: while the car drives).
 """
 
 from __future__ import annotations
