@@ -70,6 +70,8 @@ class FrameReceiver:
         self._period = 1.0 / max_rate_hz if max_rate_hz > 0 else 0.0
         self._due = -math.inf
         self._skipped = 0
+        self._skipped_since_accepted = 0
+        """Frames left undecoded since the last accepted one: a gap they fill is no loss."""
         self._pinned = pinned
         self._on_frame = on_frame
         self._restart_threshold = restart_threshold
@@ -131,6 +133,7 @@ class FrameReceiver:
         if received_s < self._due:
             with self._cond:
                 self._skipped += 1
+                self._skipped_since_accepted += 1
             return True
         self._due += self._period
         if self._due < received_s:  # the first frame, a gap, or a stream slower than the cap
@@ -174,11 +177,12 @@ class FrameReceiver:
                 if number <= last and last - number <= self._restart_threshold:
                     self._rejected["stale"] += 1
                     return False
-                if number > last + 1:
-                    self._dropped += number - last - 1
+                if number > last + 1:  # a gap, less the frames we chose not to decode
+                    self._dropped += max(number - last - 1 - self._skipped_since_accepted, 0)
                 elif number <= last:
                     log.info("NatNet frame numbers restarted (%d after %d)", number, last)
             self._last_frame = number
+            self._skipped_since_accepted = 0
             self._decoded += 1
             if frame.tracked_models_changed:
                 self.models_changed = True

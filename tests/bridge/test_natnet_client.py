@@ -117,12 +117,25 @@ def test_a_rate_cap_decodes_the_cap_on_average_and_counts_the_rest():
 
     taken, stats = feed(FrameReceiver(V3_0, max_rate_hz=50.0), 120.0)
     assert stats.decoded == sum(taken) == 100 and stats.skipped == 240 - 100 and stats.rejected_total == 0
+    assert stats.dropped == 0  # frames left undecoded on purpose are not lost frames
     kept = [k for k, t in enumerate(taken) if t]
     assert {b - a for a, b in zip(kept, kept[1:])} <= {2, 3}
     _, stats = feed(FrameReceiver(V3_0, max_rate_hz=50.0), 30.0)
     assert stats.decoded == 60 and stats.skipped == 0
     _, stats = feed(FrameReceiver(V3_0), 120.0)
     assert stats.decoded == 240 and stats.skipped == 0
+
+
+def test_a_rate_capped_receiver_still_counts_frames_the_network_lost():
+    """120 Hz capped at 50 Hz, frames 41-60 lost on the way: 20 dropped, whatever the cap
+    left undecoded around them."""
+    receiver = FrameReceiver(V3_0, max_rate_hz=50.0)
+    for k in range(240):
+        if not 40 <= k < 60:
+            receiver.handle(frame_packet(k + 1), k / 120.0)
+    stats = receiver.stats()
+    assert stats.dropped == 20, stats
+    assert stats.decoded + stats.skipped == 220
 
 
 @pytest.mark.parametrize("end_tag", [True, False])
