@@ -117,6 +117,9 @@ class NatNetClientOptions:
     frame_restart_threshold: int = 600
     max_frame_rate_hz: float = 0.0
     """Decode at most this many frames a second (0: every frame); see FrameReceiver."""
+    decode_on_read: bool = False
+    """Keep the newest frame undecoded until a reader asks for the latest samples; see
+    FrameReceiver (no ``on_frame`` then, and no ``max_frame_rate_hz``)."""
 
     def __post_init__(self) -> None:
         if self.multicast and not self.handshake and self.natnet_version is None:
@@ -127,6 +130,8 @@ class NatNetClientOptions:
                 raise ValueError(f"{name} must be > 0")
         if not (math.isfinite(self.max_frame_rate_hz) and self.max_frame_rate_hz >= 0):
             raise ValueError("max_frame_rate_hz must be >= 0 (0: every frame)")
+        if self.decode_on_read and self.max_frame_rate_hz > 0:
+            raise ValueError("decode_on_read and max_frame_rate_hz exclude each other")
 
 
 def client_options(n: NatNetConfig) -> NatNetClientOptions:
@@ -212,7 +217,7 @@ class NatNetClient:
         version = self._choose_version()
         self._receiver = FrameReceiver(version, self._on_frame, pinned=o.natnet_version is not None,
                                        restart_threshold=o.frame_restart_threshold,
-                                       max_rate_hz=o.max_frame_rate_hz)
+                                       max_rate_hz=o.max_frame_rate_hz, decode_on_read=o.decode_on_read)
         self._receiver.server_info = self._server_info
         if model_packet is not None:
             self._receiver.handle(model_packet, time.monotonic())

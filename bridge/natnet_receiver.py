@@ -14,6 +14,7 @@ from __future__ import annotations
 import logging
 import math
 import threading
+import time
 from collections import Counter
 from dataclasses import dataclass, field
 from types import MappingProxyType
@@ -48,7 +49,7 @@ class NatNetStats:
     other: int = 0  # non-frame messages (SERVERINFO, responses, ...)
     callback_errors: int = 0
     last_frame_number: int | None = None
-    skipped: int = 0  # frames over the receiver's rate cap, left undecoded
+    skipped: int = 0  # frames left undecoded: over the rate cap, or newer ones came before a read
 
     @property
     def rejected_total(self) -> int:
@@ -62,10 +63,25 @@ class FrameReceiver:
     ``wait_for_frames``) may be called from any thread. A frame number lower than the last
     one is rejected as ``stale``, unless it is more than ``restart_threshold`` lower: then
     the server restarted and the sequence starts over.
+
+    ``decode_on_read``: frames are kept undecoded as they come, the newest only, and decoded
+    when a reader asks for the latest samples -- for a reader that wants the newest pose a
+    few times a second of a stream many times faster (the command loop: 50 Hz of Motive's
+    120-360). The samples it reads are those it would have read with every frame decoded
+    (the newest received, with its own arrival time); the frames in between are counted as
+    skipped. It takes no ``on_frame`` and no ``max_rate_hz``.
     """
 
     def __init__(self, version: Version | None, on_frame: Callable[[Frame], None] | None = None,
-                 *, pinned: bool = False, restart_threshold: int = 600, max_rate_hz: float = 0.0) -> None:
+                 *, pinned: bool = False, restart_threshold: int = 600, max_rate_hz: float = 0.0,
+                 decode_on_read: bool = False) -> None:
+        if decode_on_read and (on_frame is not None or max_rate_hz > 0):
+            raise ValueError("decode_on_read takes neither on_frame nor max_rate_hz")
+        self._decode_on_read = decode_on_read
+        self._held: tuple[memoryview, float] | None = None
+        """The newest frame's payload and arrival, not decoded yet (decode_on_read)."""
+        self._decoding = threading.Lock()
+        """One reader decodes the held frame at a time (so none is taken for stale)."""
         self._version = version
         self._period = 1.0 / max_rate_hz if max_rate_hz > 0 else 0.0
         self._due = -math.inf
@@ -102,6 +118,9 @@ class FrameReceiver:
                 return None
             if self._version is None:
                 raise NatNetError("frame before the NatNet version is known", "no_version")
+            if self._decode_on_read:
+                self._hold(payload, received_s)
+                return None
             if self._over_rate(received_s):
                 if _models_changed_hint(payload):
                     with self._cond:
@@ -121,6 +140,38 @@ class FrameReceiver:
                     self._callback_errors += 1
                 log.exception("NatNet on_frame callback failed on frame %d", frame.frame_number)
         return frame
+
+    def _hold(self, payload: memoryview, received_s: float) -> None:
+        """Keep the newest frame for the next read; the one it replaces is skipped (but a
+        change of Motive's models it tells is kept)."""
+        with self._cond:
+            if self._held is not None:
+                self._skipped += 1
+                self._skipped_since_accepted += 1
+                if _models_changed_hint(self._held[0]):
+                    self.models_changed = True
+            self._held = (payload, received_s)
+            self._cond.notify_all()
+
+    def _settle(self) -> None:
+        """Decode and accept the held frame, if any (decode_on_read): in the reader's thread."""
+        if not self._decode_on_read:
+            return
+        with self._decoding:
+            with self._cond:  # the frames skipped before it go with it: later ones may come meanwhile
+                held, self._held = self._held, None
+                skipped, self._skipped_since_accepted = self._skipped_since_accepted, 0
+            if held is None:
+                return
+            payload, received_s = held
+            try:
+                frame = natnet.decode_frame(payload, self._version)
+            except NatNetError as exc:
+                with self._cond:  # the frames skipped before it go with the next one taken
+                    self._skipped_since_accepted += skipped
+                self._reject(exc.reason, str(exc))
+                return
+            self._accept(frame, received_s, skipped)
 
     def _over_rate(self, received_s: float) -> bool:
         """Whether a frame arriving at ``received_s`` is over ``max_rate_hz`` (then it is
@@ -169,20 +220,26 @@ class FrameReceiver:
         log.log(logging.WARNING if first else logging.DEBUG,
                 "NatNet datagram rejected (%s): %s", reason, message)
 
-    def _accept(self, frame: Frame, received_s: float) -> bool:
+    def _accept(self, frame: Frame, received_s: float, skipped: int | None = None) -> bool:
+        """Take a decoded frame; ``skipped``: frames left undecoded since the last one taken
+        (None: the count kept for the socket thread, which skips and takes alike)."""
         number = frame.frame_number
         with self._cond:
+            owed = self._skipped_since_accepted if skipped is None else skipped
             last = self._last_frame
             if last is not None:
                 if number <= last and last - number <= self._restart_threshold:
+                    if skipped is not None:  # handed over with this frame: they go with the next
+                        self._skipped_since_accepted += skipped
                     self._rejected["stale"] += 1
                     return False
                 if number > last + 1:  # a gap, less the frames we chose not to decode
-                    self._dropped += max(number - last - 1 - self._skipped_since_accepted, 0)
+                    self._dropped += max(number - last - 1 - owed, 0)
                 elif number <= last:
                     log.info("NatNet frame numbers restarted (%d after %d)", number, last)
+            if skipped is None:
+                self._skipped_since_accepted = 0
             self._last_frame = number
-            self._skipped_since_accepted = 0
             self._decoded += 1
             if frame.tracked_models_changed:
                 self.models_changed = True
@@ -198,23 +255,35 @@ class FrameReceiver:
         return {d.name: d.id for d in model.rigid_bodies} if model is not None else {}
 
     def latest(self, body_id: int) -> BodySample | None:
+        self._settle()
         with self._cond:
             return self._latest.get(body_id)
 
     def latest_all(self) -> dict[int, BodySample]:
+        self._settle()
         with self._cond:
             return dict(self._latest)
 
     def stats(self) -> NatNetStats:
+        self._settle()
         with self._cond:
             return NatNetStats(self._received, self._decoded,
                                MappingProxyType(dict(self._rejected)), self._dropped,
                                self._other, self._callback_errors, self._last_frame, self._skipped)
 
     def wait_for_frames(self, count: int, timeout_s: float) -> bool:
-        """Block until ``count`` frames in total have been accepted, or the timeout passes."""
-        with self._cond:
-            return self._cond.wait_for(lambda: self._decoded >= count, timeout_s)
+        """Block until ``count`` frames in total have been accepted, or the timeout passes
+        (with ``decode_on_read``, frames held and read count)."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            self._settle()
+            with self._cond:
+                if self._decoded >= count:
+                    return True
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return False
+                self._cond.wait(left)
 
 
 def _models_changed_hint(payload: memoryview | bytes) -> bool:

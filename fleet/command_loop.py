@@ -40,6 +40,7 @@ says so once.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import os
@@ -271,7 +272,9 @@ class _Loop:
 
 def _connect(loop: _Loop, stop: threading.Event) -> None:
     """Reach Motive (retrying every ``control.retry_s``) and hand the client to the loop."""
-    options = client_options(loop.scenario.natnet)
+    # A tick reads the newest pose: frames are decoded when it asks, not as they come
+    # (50 Hz of Motive's 120-360; the same pose, with its own arrival time).
+    options = dataclasses.replace(client_options(loop.scenario.natnet), decode_on_read=True)
     while not stop.is_set():
         client = NatNetClient(options)
         try:

@@ -154,6 +154,76 @@ def test_a_skipped_frame_still_tells_that_motives_models_changed(end_tag):
     assert quiet.stats().skipped == 1 and not quiet.models_changed
 
 
+def test_decode_on_read_gives_the_newest_frame_with_its_own_arrival_time():
+    """The command loop's reader: frames kept undecoded as they come; a read decodes the
+    newest, the one a receiver decoding every frame would give, stamped when it arrived."""
+    receiver = FrameReceiver(V3_0, decode_on_read=True)
+    for k in range(1, 6):
+        assert receiver.handle(frame_packet(k), k / 120) is None  # held, not decoded
+    sample = receiver.latest(2)
+    assert sample.frame_number == 5 and sample.received_s == 5 / 120
+    stats = receiver.stats()
+    assert (stats.received, stats.decoded, stats.skipped, stats.dropped) == (5, 1, 4, 0)
+    assert receiver.latest(2) is sample  # nothing new held: nothing decoded again
+    for k in (6, 7, 11):  # 8-10 lost on the way
+        receiver.handle(frame_packet(k), k / 120)
+    assert set(receiver.latest_all()) == {1, 2} and receiver.latest(1).frame_number == 11
+    stats = receiver.stats()
+    assert (stats.decoded, stats.skipped, stats.dropped) == (2, 6, 3)
+
+
+def test_decode_on_read_keeps_the_last_good_pose_when_the_newest_datagram_is_bad():
+    receiver = FrameReceiver(V3_0, decode_on_read=True)
+    receiver.handle(frame_packet(1), 0.0)
+    assert receiver.latest(1).frame_number == 1
+    good = frame_packet(2)
+    receiver.handle(good[:-9], 1 / 120)  # truncated: cut inside its last rigid body
+    sample = receiver.latest(1)
+    assert sample.frame_number == 1 and sample.received_s == 0.0  # its age is the truth
+    assert receiver.stats().rejected_total == 1
+
+
+def test_decode_on_read_still_hears_that_motives_models_changed():
+    receiver = FrameReceiver(V3_0, decode_on_read=True)
+    payload = nn.encode_frame(Frame(1, (RigidBody(1, *POSE),), 1 / 120, params=0x02), V3_0)
+    receiver.handle(struct.pack("<HH", MessageId.FRAMEOFDATA, len(payload)) + payload, 0.0)
+    receiver.handle(frame_packet(2), 1 / 120)  # the change is in the frame nobody decodes
+    assert receiver.models_changed
+
+
+def test_decode_on_read_while_the_socket_thread_feeds_never_goes_back():
+    receiver = FrameReceiver(V3_0, decode_on_read=True)
+    fed = threading.Event()
+
+    def feed():
+        for k in range(1, 3001):
+            receiver.handle(frame_packet(k), k / 120)
+        fed.set()
+
+    feeder = threading.Thread(target=feed)
+    feeder.start()
+    seen = []
+    while not fed.is_set():
+        sample = receiver.latest(1)
+        if sample is not None:
+            seen.append(sample.frame_number)
+    feeder.join(10.0)
+    assert receiver.latest(1).frame_number == 3000
+    assert seen == sorted(seen) and len(seen) > 10
+    stats = receiver.stats()
+    assert stats.rejected_total == 0 and stats.dropped == 0 and stats.decoded + stats.skipped == 3000
+    assert receiver.wait_for_frames(stats.decoded, timeout_s=0.1)
+
+
+def test_decode_on_read_takes_no_callback_and_no_rate_cap():
+    with pytest.raises(ValueError):
+        FrameReceiver(V3_0, lambda frame: None, decode_on_read=True)
+    with pytest.raises(ValueError):
+        FrameReceiver(V3_0, max_rate_hz=50.0, decode_on_read=True)
+    with pytest.raises(ValueError):
+        NatNetClientOptions(max_frame_rate_hz=50.0, decode_on_read=True)
+
+
 def test_options_are_validated():
     with pytest.raises(ValueError, match="natnet_version"):
         NatNetClientOptions(multicast=True, handshake=False)
