@@ -47,10 +47,8 @@ def read_ticks(pid: int, children: bool = False) -> int | None:
     """utime + stime of a process in clock ticks; None if it is gone or unreadable.
     ``children``: with its live descendants' (a car process and its command loop,
     fleet.command_loop: what one car costs)."""
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            ticks = parse_stat_ticks(f.read())
-    except (OSError, ValueError):
+    ticks = _stat_ticks(f"/proc/{pid}/stat")
+    if ticks is None:
         return None
     if children:
         for child in child_pids(pid):
@@ -61,18 +59,21 @@ def read_ticks(pid: int, children: bool = False) -> int | None:
 def read_thread_ticks(pid: int) -> dict[int, int]:
     """utime + stime of every live thread of a process, clock ticks by thread id (empty if
     it is gone)."""
-    ticks = {}
     try:
         tasks = os.listdir(f"/proc/{pid}/task")
     except OSError:
-        return ticks
-    for task in tasks:
-        try:
-            with open(f"/proc/{pid}/task/{task}/stat") as f:
-                ticks[int(task)] = parse_stat_ticks(f.read())
-        except (OSError, ValueError):
-            continue  # the thread ended between the listing and the read
-    return ticks
+        return {}
+    ticks = {int(task): _stat_ticks(f"/proc/{pid}/task/{task}/stat") for task in tasks}
+    return {tid: t for tid, t in ticks.items() if t is not None}  # a thread may end between the two
+
+
+def _stat_ticks(path: str) -> int | None:
+    """utime + stime from a stat file of /proc; None if it is gone or unreadable."""
+    try:
+        with open(path) as f:
+            return parse_stat_ticks(f.read())
+    except (OSError, ValueError):
+        return None
 
 
 def child_pids(pid: int) -> list[int]:
@@ -212,6 +213,6 @@ def breakdown(a: Snapshot, b: Snapshot, main_tid: int, natnet_tid: int | None) -
         "threads": {"main": grown(a.threads, threads, [main_tid]),
                     "natnet": grown(a.threads, threads, [natnet_tid] if natnet_tid is not None else []),
                     "other": grown(a.threads, threads, [t for t in threads if t not in named])},
-        "command_loop": {"main": grown(a.loop_threads, loop, [loop_pid]) if loop else 0.0,
+        "command_loop": {"main": grown(a.loop_threads, loop, [loop_pid]),
                          "other": grown(a.loop_threads, loop, [t for t in loop if t != loop_pid])},
     }
