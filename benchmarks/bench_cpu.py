@@ -23,12 +23,12 @@ Zenoh's), and the command loop process (its ticks, its own NatNet client).
 from __future__ import annotations
 
 import argparse
-import os
 import statistics
 import tempfile
 from pathlib import Path
 
 from trustfg.agent.scenario_files import load_scenario
+from trustfg.fleet.cpu import usable_cores
 from trustfg.fleet.launch import loopback_fleet, run
 
 
@@ -38,7 +38,7 @@ def main() -> None:
                         help="shipped scene names or files (default: %(default)s)")
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
-    print(f"car process CPU, share of one core from the go to the first arrival ({os.cpu_count()} cores)")
+    print(f"car process CPU, share of one core from the go to the first arrival ({usable_cores()} cores)")
     print(f"{'scene':>16} {'peers':>5} {'mean':>6} {'min':>6} {'max':>6} {'all processes':>14} {'replan p95 ms':>14}")
     for name in args.scenes:
         scenario = loopback_fleet(load_scenario(name), None, None, 0.0)

@@ -14,6 +14,7 @@ Inside a car process: :class:`Sections` books its main thread's CPU time to the 
 the loop it was spent in, and :func:`snapshot` / :func:`breakdown` turn two moments of
 that and of the kernel's per-thread counts (the process's and its command loop's) into
 where the car's CPU went between them (fleet.car_process: while the car drives).
+:func:`machine_load` says whether a run's processes saturated the cores it may use.
 """
 
 from __future__ import annotations
@@ -216,3 +217,23 @@ def breakdown(a: Snapshot, b: Snapshot, main_tid: int, natnet_tid: int | None) -
         "command_loop": {"main": grown(a.loop_threads, loop, [loop_pid]),
                          "other": grown(a.loop_threads, loop, [t for t in loop if t != loop_pid])},
     }
+
+
+SATURATED = 0.9
+"""A run whose processes took this share of the machine's cores from the go to the first
+arrival was starved: its replan times and arrivals measure the machine, not the planner."""
+
+
+def machine_load(cpu: dict[str, dict | None], cores: int) -> dict:
+    """How busy the run kept the machine from the go to the first arrival: ``busy_cores``
+    (the processes' shares of one core, summed), ``cores``, and ``saturated``."""
+    busy = sum((entry or {}).get("share_go_first_arrival") or 0.0 for entry in cpu.values())
+    return {"busy_cores": round(busy, 2), "cores": cores, "saturated": busy >= SATURATED * cores}
+
+
+def usable_cores() -> int:
+    """The cores this process may run on (its affinity: a container or taskset may allow
+    fewer than the machine has)."""
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1

@@ -27,7 +27,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import logging
-import os
 import socket
 import subprocess
 import sys
@@ -54,6 +53,7 @@ from ..agent.scenario_files import dump_scenario, load_scenario
 from ..bridge import natnet
 from .bus import FleetBus
 from .command import command_parser, configured, stop_on_signals
+from .cpu import machine_load, usable_cores
 from .fleet_sim import draw_departures
 from .laps import final_legs
 from .link_keys import with_link_keys
@@ -281,26 +281,6 @@ def run(scenario: Scenario, out: Path, seed: int = 0, timeout_s: float | None = 
     return summary
 
 
-
-
-SATURATED = 0.9
-"""A run whose processes took this share of the machine's cores from the go to the first
-arrival was starved: its replan times and arrivals measure the machine, not the planner."""
-
-
-def machine_load(cpu: dict[str, dict | None], cores: int) -> dict:
-    """How busy the run kept the machine from the go to the first arrival: ``busy_cores``
-    (the processes' shares of one core, summed), ``cores``, and ``saturated``."""
-    busy = sum((entry or {}).get("share_go_first_arrival") or 0.0 for entry in cpu.values())
-    return {"busy_cores": round(busy, 2), "cores": cores, "saturated": busy >= SATURATED * cores}
-
-
-def usable_cores() -> int:
-    """The cores this process may run on (its affinity: a container or taskset may allow
-    fewer than the machine has)."""
-    if hasattr(os, "sched_getaffinity"):
-        return len(os.sched_getaffinity(0))
-    return os.cpu_count() or 1
 
 
 def _port_free(port: int) -> bool:

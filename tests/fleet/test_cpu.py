@@ -125,7 +125,7 @@ def test_breakdown_splits_a_car_into_its_threads_and_its_command_loop():
 
 
 def test_a_run_that_fills_the_cores_is_called_saturated():
-    from trustfg.fleet.launch import machine_load, usable_cores
+    from trustfg.fleet.cpu import machine_load, usable_cores
 
     cpu = {"launcher": {"share_go_first_arrival": 0.05}, "mocap-sim": {"share_go_first_arrival": 0.1},
            **{f"car {i}": {"share_go_first_arrival": 0.22} for i in range(1, 9)}, "car 9": None}
