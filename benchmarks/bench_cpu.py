@@ -16,8 +16,10 @@ Then where a car's CPU goes while it drives (each car's own window, from its dep
 to its arrival: ``cpu_driving`` in the car's ``--stats``, fleet.cpu.breakdown), as shares
 of one core averaged over the cars: the main thread by section of its loop (replan,
 evidence, messages in, frames, publishing, feeding the command loop, the loop's own
-passes and waits), the car process's other threads (the NatNet client's socket thread,
-Zenoh's), and the command loop process (its ticks, its own NatNet client).
+passes and waits), the car process's other threads (Zenoh's; a NatNet socket thread, had
+the client one), and the command loop process (its ticks, and any other thread of it).
+Both NatNet clients are pulled by their readers (bridge.natnet_client, "Pull"): their
+work is in the main thread's "frames" and in the loop's ticks.
 """
 
 from __future__ import annotations

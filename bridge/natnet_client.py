@@ -46,13 +46,28 @@ tracked models changed. Without an answer the client still streams; the model st
 
 One thread owns the receiving socket; the handshake runs before it starts, in the caller.
 Sockets always have timeouts, so ``close()`` stops and joins within a bounded time.
+
+Pull (``NatNetClientOptions.pull``): no socket thread. Every read (``latest``,
+``latest_all``, ``stats``, ``wait_for_frames``, or ``pump`` itself) first takes every
+datagram waiting on the socket, each stamped with its arrival as the kernel saw it
+(SO_TIMESTAMPNS, on the monotonic clock; where the OS gives no stamp, the read's time --
+and Linux turns stamping on for the host a moment after the first socket asks, so the
+very first datagrams may carry it),
+and does the unicast keepalive and reconnect duties the thread would have done. For a
+process that reads at a rate of its own anyway (a car's command loop and its agent, 50 Hz
+of Motive's 120-360): no thread is woken, and no interpreter lock taken, for each frame.
+The samples read are those the thread would have given, with the same arrival times;
+while nobody reads, datagrams wait in the socket's receive buffer (``receive_buffer_bytes``;
+what overflows it is lost, the newest first, and counted as ``dropped`` by the frame-number gap).
 """
 
 from __future__ import annotations
 
 import logging
 import math
+import select
 import socket
+import struct
 import sys
 import threading
 import time
@@ -78,6 +93,11 @@ __all__ = ["NatNetClientOptions", "NatNetClient", "NatNetConnectionError", "Fram
 log = logging.getLogger(__name__)
 
 _RECV_BYTES = 65536
+
+_SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35 if sys.platform.startswith("linux") else None)
+"""Linux's SO_TIMESTAMPNS (SCM_TIMESTAMPNS in the control message; Python does not name it)."""
+_TIMESPEC = struct.Struct("@ll")
+"""struct timespec as SO_TIMESTAMPNS hands it: seconds and nanoseconds, native longs."""
 
 
 class NatNetConnectionError(ConnectionError):
@@ -120,6 +140,8 @@ class NatNetClientOptions:
     decode_on_read: bool = False
     """Keep the newest frame undecoded until a reader asks for the latest samples; see
     FrameReceiver (no ``on_frame`` then, and no ``max_frame_rate_hz``)."""
+    pull: bool = False
+    """No socket thread: readers take the waiting datagrams (module docstring, "Pull")."""
 
     def __post_init__(self) -> None:
         if self.multicast and not self.handshake and self.natnet_version is None:
@@ -164,16 +186,43 @@ def _receive_buffer(sock: socket.socket, nbytes: int) -> None:
         log.debug("could not set SO_RCVBUF to %d: %s", nbytes, exc)
 
 
-class NatNetClient:
-    """Receives NatNet frames in a background thread; see the module docstring.
+def _stamp_arrivals(sock: socket.socket) -> int:
+    """Have the kernel stamp each datagram's arrival (SO_TIMESTAMPNS); the control-message
+    buffer size ``recvmsg`` needs for the stamp, 0 where the OS gives none."""
+    if _SO_TIMESTAMPNS is None or not hasattr(sock, "recvmsg"):
+        return 0
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, _SO_TIMESTAMPNS, 1)
+    except OSError as exc:
+        log.debug("no kernel arrival stamps (SO_TIMESTAMPNS): %s", exc)
+        return 0
+    return socket.CMSG_SPACE(_TIMESPEC.size)
 
-    ``on_frame`` runs on the socket thread and must not block (hand the frame to a queue).
+
+def arrival(ancillary: list, mono: float, real: float) -> float:
+    """A datagram's arrival on the monotonic clock, from its SO_TIMESTAMPNS control message
+    (the wall clock's stamp, moved by how long ago it was: ``mono`` and ``real`` are the
+    two clocks read together); ``mono`` without one. Never later than ``mono``."""
+    for level, kind, data in ancillary:
+        if level == socket.SOL_SOCKET and kind == _SO_TIMESTAMPNS and len(data) >= _TIMESPEC.size:
+            seconds, nanoseconds = _TIMESPEC.unpack_from(data)
+            return min(mono, mono - (real - (seconds + nanoseconds * 1e-9)))
+    return mono
+
+
+class NatNetClient:
+    """Receives NatNet frames in a background thread, or as readers pull them; see the
+    module docstring.
+
+    ``on_frame(frame, received_s)`` runs on the socket thread (pulling: in the reader's)
+    and must not block (hand the frame to a queue); ``received_s`` is its arrival,
+    ``time.monotonic()``.
     Use as a context manager; ``start()`` raises :class:`NatNetConnectionError` when the
     server does not answer or the sockets cannot be set up.
     """
 
     def __init__(self, options: NatNetClientOptions = NatNetClientOptions(),
-                 on_frame: Callable[[Frame], None] | None = None) -> None:
+                 on_frame: Callable[[Frame, float], None] | None = None) -> None:
         self.options = options
         self._on_frame = on_frame
         self._receiver: FrameReceiver | None = None
@@ -181,6 +230,13 @@ class NatNetClient:
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
         self._server_info: ServerInfo | None = None
+        self._pulling = threading.Lock()
+        """One reader takes the waiting datagrams at a time (pull)."""
+        self._stamp_bytes = 0
+        """recvmsg's control buffer for the kernel's arrival stamp (pull; 0: none)."""
+        self._last_rx = self._next_keepalive = self._next_model = 0.0
+        """The unicast duties' clock (module docstring): the last datagram, the next
+        KEEPALIVE, the next MODELDEF request."""
 
     # -- lifecycle ---------------------------------------------------------------------
     def __enter__(self) -> "NatNetClient":
@@ -222,10 +278,16 @@ class NatNetClient:
         if model_packet is not None:
             self._receiver.handle(model_packet, time.monotonic())
         self._stop.clear()
-        self._thread = threading.Thread(target=self._run, name="natnet-client", daemon=True)
-        self._thread.start()
-        log.info("NatNet client receiving %s NatNet %s on %s", "multicast" if o.multicast
-                 else "unicast", version, self.local_address)
+        now = time.monotonic()
+        self._last_rx, self._next_keepalive, self._next_model = now, now + o.keepalive_interval_s, now
+        if o.pull:
+            self._stamp_bytes = _stamp_arrivals(self._sock)
+            self._sock.setblocking(False)
+        else:
+            self._thread = threading.Thread(target=self._run, name="natnet-client", daemon=True)
+            self._thread.start()
+        log.info("NatNet client receiving %s NatNet %s on %s%s", "multicast" if o.multicast
+                 else "unicast", version, self.local_address, " (pulled by its readers)" if o.pull else "")
         return self
 
     def close(self) -> None:
@@ -237,7 +299,8 @@ class NatNetClient:
             if thread.is_alive():
                 log.error("NatNet client thread did not stop within %.1f s",
                           self.options.close_timeout_s)
-        sock, self._sock = self._sock, None
+        with self._pulling:  # no reader is taking datagrams from it as it closes
+            sock, self._sock = self._sock, None
         if sock is not None:
             if not self.options.multicast and self._server_info is not None:
                 try:  # polite: lets the server forget us at once
@@ -260,7 +323,8 @@ class NatNetClient:
 
     @property
     def thread_id(self) -> int | None:
-        """The OS id of the socket thread (for its CPU time in /proc); None before start."""
+        """The OS id of the socket thread (for its CPU time in /proc); None before start,
+        and when pulling (no thread: its work is its readers')."""
         thread = self._thread
         return thread.native_id if thread is not None else None
 
@@ -279,19 +343,71 @@ class NatNetClient:
         return self._receiver.body_ids() if self._receiver else {}
 
     def latest(self, body_id: int) -> BodySample | None:
+        self.pump()
         return self._receiver.latest(body_id) if self._receiver else None
 
     def latest_all(self) -> dict[int, BodySample]:
+        self.pump()
         return self._receiver.latest_all() if self._receiver else {}
 
     def stats(self) -> NatNetStats:
+        self.pump()
         return self._receiver.stats() if self._receiver else NatNetStats()
 
     def wait_for_frames(self, count: int, timeout_s: float) -> bool:
         """Block until ``count`` frames have been accepted since start (False on timeout)."""
         if self._receiver is None:
             raise RuntimeError("NatNetClient not started")
-        return self._receiver.wait_for_frames(count, timeout_s)
+        if not self.options.pull:
+            return self._receiver.wait_for_frames(count, timeout_s)
+        deadline = time.monotonic() + timeout_s
+        while True:
+            self.pump()
+            if self._receiver.wait_for_frames(count, 0.0):
+                return True
+            left, sock = deadline - time.monotonic(), self._sock
+            if left <= 0 or sock is None:
+                return False
+            try:
+                select.select([sock], [], [], min(left, self.options.poll_timeout_s))
+            except (OSError, ValueError):  # closed meanwhile
+                return False
+
+    def pump(self) -> int:
+        """Pull: take every datagram waiting on the socket and do the unicast duties; the
+        number taken (0 with a socket thread, which takes them itself)."""
+        receiver = self._receiver
+        if not self.options.pull or receiver is None:
+            return 0
+        with self._pulling:
+            sock = self._sock
+            if sock is None:
+                return 0
+            taken = 0
+            mono, real = time.monotonic(), time.time()
+            while True:
+                try:
+                    if self._stamp_bytes:
+                        data, ancillary, _, _ = sock.recvmsg(_RECV_BYTES, self._stamp_bytes)
+                        received = arrival(ancillary, mono, real)
+                    else:
+                        data, _ = sock.recvfrom(_RECV_BYTES)
+                        received = mono
+                except (BlockingIOError, InterruptedError):
+                    break
+                except OSError as exc:  # e.g. ICMP port unreachable: nothing more to take now
+                    log.debug("NatNet receive: %s", exc)
+                    break
+                if not data:
+                    continue
+                taken += 1
+                self._last_rx = mono
+                try:
+                    receiver.handle(data, received)
+                except Exception:  # a bug must not take the reader down with it
+                    log.exception("NatNet client: failed to handle a datagram")
+            self._duties(sock, mono)
+        return taken
 
     # -- sockets -----------------------------------------------------------------------
     @property
@@ -424,16 +540,29 @@ class NatNetClient:
             sock.close()
 
     # -- the socket thread ---------------------------------------------------------------
+    def _duties(self, sock: socket.socket, now: float) -> None:
+        """Unicast: MODELDEF again when Motive's models changed, KEEPALIVE, and CONNECT
+        again after ``reconnect_after_s`` of silence (module docstring)."""
+        o, receiver = self.options, self._receiver
+        if o.multicast or receiver is None:
+            return
+        try:
+            if receiver.models_changed and now >= self._next_model:
+                sock.sendto(natnet.serialize(natnet.RequestModelDef()), self._server)
+                self._next_model = now + 1.0
+            if now >= self._next_keepalive:
+                sock.sendto(natnet.serialize(natnet.KeepAlive()), self._server)
+                self._next_keepalive = now + o.keepalive_interval_s
+            if now - self._last_rx > o.reconnect_after_s:
+                log.warning("NatNet: nothing received for %.1f s, reconnecting", now - self._last_rx)
+                sock.sendto(self._connect_packet(), self._server)
+                self._last_rx = now
+        except OSError as exc:
+            log.debug("NatNet send: %s", exc)
+
     def _run(self) -> None:
         o, sock, receiver = self.options, self._sock, self._receiver
         assert sock is not None and receiver is not None
-        unicast = not o.multicast
-        keepalive = natnet.serialize(natnet.KeepAlive())
-        connect = self._connect_packet()
-        now = time.monotonic()
-        next_keepalive = now + o.keepalive_interval_s
-        next_model = now
-        last_rx = now
         while not self._stop.is_set():
             try:
                 data, _ = sock.recvfrom(_RECV_BYTES)
@@ -447,26 +576,12 @@ class NatNetClient:
                 self._stop.wait(o.poll_timeout_s)  # no busy loop on a persistent error
             now = time.monotonic()
             if data:
-                last_rx = now
+                self._last_rx = now
                 try:
                     receiver.handle(data, now)
                 except Exception:  # a bug must not kill the only thread that sees poses
                     log.exception("NatNet client: failed to handle a datagram")
-            if unicast:
-                try:
-                    if receiver.models_changed and now >= next_model:  # Motive's models changed
-                        sock.sendto(natnet.serialize(natnet.RequestModelDef()), self._server)
-                        next_model = now + 1.0
-                    if now >= next_keepalive:
-                        sock.sendto(keepalive, self._server)
-                        next_keepalive = now + o.keepalive_interval_s
-                    if now - last_rx > o.reconnect_after_s:
-                        log.warning("NatNet: nothing received for %.1f s, reconnecting",
-                                    now - last_rx)
-                        sock.sendto(connect, self._server)
-                        last_rx = now
-                except OSError as exc:
-                    log.debug("NatNet send: %s", exc)
+            self._duties(sock, now)
 
 
 def fresh_pose(client: NatNetClient | None, body_id: int, max_age_s: float,

@@ -2,11 +2,12 @@
 rigid body out.
 
 :class:`FrameReceiver` opens nothing: :class:`~trustfg.bridge.natnet_client.NatNetClient`
-feeds it from its socket thread, and tests drive it with captured bytes. It decodes (with
+feeds it (from its socket thread, or from its readers' when they pull), and tests drive
+it with captured bytes. It decodes (with
 the pure codec in :mod:`bridge.natnet`), counts (received, decoded, rejected by reason,
 frames dropped by gaps in frame numbers, stale/out-of-order), keeps a latest-value slot
 per rigid body id, keeps the latest model definitions (MODELDEF: rigid bodies' names and
-ids) and calls an optional ``on_frame`` callback.
+ids) and calls an optional ``on_frame(frame, received_s)`` callback.
 """
 
 from __future__ import annotations
@@ -72,7 +73,7 @@ class FrameReceiver:
     skipped. It takes no ``on_frame`` and no ``max_rate_hz``.
     """
 
-    def __init__(self, version: Version | None, on_frame: Callable[[Frame], None] | None = None,
+    def __init__(self, version: Version | None, on_frame: Callable[[Frame, float], None] | None = None,
                  *, pinned: bool = False, restart_threshold: int = 600, max_rate_hz: float = 0.0,
                  decode_on_read: bool = False) -> None:
         if decode_on_read and (on_frame is not None or max_rate_hz > 0):
@@ -134,7 +135,7 @@ class FrameReceiver:
             return None
         if self._on_frame is not None:
             try:
-                self._on_frame(frame)
+                self._on_frame(frame, received_s)
             except Exception:  # the callback is user code; the socket thread must go on
                 with self._cond:
                     self._callback_errors += 1

@@ -2,7 +2,9 @@
 
 Threads and one process of its own, each owning what it touches:
 
-* the NatNet client's socket thread hands every frame to a queue (and keeps the latest
+* the NatNet client has no thread: each pass of the main loop takes the datagrams
+  waiting on its socket (bridge.natnet_client, "Pull"), and every frame, at most at the
+  command rate, goes to a queue stamped with its arrival (the client keeps the latest
   pose of every rigid body);
 * Zenoh's callbacks hand every fleet message to the bus queue (trustfg.fleet.bus);
 * the command loop, a process of its own (fleet.command_loop), at
@@ -91,7 +93,7 @@ class CarProcess:
         self.clock = clock or (lambda: time.time() + car.clock_offset_s)
         # The agent takes poses at the command rate, as in the in-process fleet (its
         # validated rate): the frames between are left undecoded (Motive streams 120-360 Hz).
-        self.natnet = dataclasses.replace(client_options(scenario.natnet),
+        self.natnet = dataclasses.replace(client_options(scenario.natnet), pull=True,
                                           max_frame_rate_hz=scenario.control.command_rate_hz)
         link_key(car)  # a missing or bad key is a config error now, not when driving
         self.stop = threading.Event()
@@ -129,14 +131,17 @@ class CarProcess:
 
     # --- inputs ---------------------------------------------------------------------------
 
-    def _on_frame(self, frame: natnet.Frame) -> None:
-        """NatNet socket thread: hand over, never block (the oldest goes, counted, if the
-        agent loop fell that far behind)."""
+    def _on_frame(self, frame: natnet.Frame, received_s: float) -> None:
+        """A frame the NatNet client took (monotonic ``received_s``), stamped with its
+        arrival on the fleet clock: hand over, never block (the oldest goes, counted, if
+        the agent loop fell that far behind)."""
         if len(self.frames) == self.frames.maxlen:
             self.counters["frames_overflowed"] += 1
-        self.frames.append((self.clock(), frame))
+        self.frames.append((self.clock() - (time.monotonic() - received_s), frame))
 
     def _observe_frames(self) -> None:
+        if self._natnet is not None:
+            self._natnet.pump()  # the datagrams waiting since the last pass
         up = self.scenario.natnet.up_axis
         while self.frames:
             t, frame = self.frames.popleft()

@@ -272,9 +272,10 @@ class _Loop:
 
 def _connect(loop: _Loop, stop: threading.Event) -> None:
     """Reach Motive (retrying every ``control.retry_s``) and hand the client to the loop."""
-    # A tick reads the newest pose: frames are decoded when it asks, not as they come
-    # (50 Hz of Motive's 120-360; the same pose, with its own arrival time).
-    options = dataclasses.replace(client_options(loop.scenario.natnet), decode_on_read=True)
+    # A tick reads the newest pose: frames are taken from the socket and decoded when it
+    # asks, not as they come (50 Hz of Motive's 120-360; the same pose, with its own
+    # arrival time), and no thread wakes for each.
+    options = dataclasses.replace(client_options(loop.scenario.natnet), decode_on_read=True, pull=True)
     while not stop.is_set():
         client = NatNetClient(options)
         try:

@@ -196,8 +196,9 @@ def breakdown(a: Snapshot, b: Snapshot, main_tid: int, natnet_tid: int | None) -
     """Where a car's CPU went between two snapshots, in seconds of CPU over ``wall_s``:
     ``sections`` of the main thread (what it spent before its first booking is not in
     them); ``threads`` of the car process: ``main``, ``natnet`` (the NatNet
-    client's socket thread) and ``other`` (Zenoh's and the rest); ``command_loop``:
-    ``main`` (its ticks) and ``other`` (its own NatNet client), zero when the loop was not
+    client's socket thread; none when its readers pull) and ``other`` (Zenoh's and the
+    rest); ``command_loop``: ``main`` (its ticks) and ``other`` (its other threads: its
+    NatNet client's, when it has one), zero when the loop was not
     the same process at both ends (it died and was restarted). A thread that ended within
     the window is not counted (a running car keeps its threads)."""
     def grown(before: dict[int, int], after: dict[int, int], tids) -> float:

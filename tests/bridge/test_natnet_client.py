@@ -12,7 +12,8 @@ import pytest
 
 from trustfg.bridge import natnet as nn
 from trustfg.bridge.natnet import V3_0, V4_1, Frame, MessageId, RigidBody, Version
-from trustfg.bridge.natnet_client import FrameReceiver, NatNetClient, NatNetClientOptions, NatNetConnectionError
+from trustfg.bridge.natnet_client import (FrameReceiver, NatNetClient, NatNetClientOptions, NatNetConnectionError,
+                                         arrival)
 
 POSE = ((0.5, 0.25, -1.0), (0.0, 0.0, 0.0, 1.0))
 
@@ -87,7 +88,7 @@ def test_other_messages_and_the_version_from_server_info():
 def test_callback_errors_are_counted_and_do_not_stop_the_receiver():
     seen = []
 
-    def callback(frame):
+    def callback(frame, received_s):
         seen.append(frame.frame_number)
         if frame.frame_number == 2:
             raise RuntimeError("boom")
@@ -332,6 +333,94 @@ def test_unicast_handshake_frames_keepalive_reconnect_and_disconnect(traffic):
         assert server.wait_for(MessageId.DISCONNECT)
 
 
+def test_arrival_is_the_kernels_stamp_on_the_monotonic_clock():
+    stamp = struct.pack("@ll", 1000, 250_000_000)  # wall clock 1000.25 s
+    ancillary = [(socket.SOL_SOCKET, 35, stamp)]
+    assert arrival(ancillary, mono=50.0, real=1000.75) == pytest.approx(49.5)
+    assert arrival(ancillary, mono=50.0, real=1000.0) == 50.0  # a stamp "from the future": now
+    assert arrival([], mono=50.0, real=1000.75) == 50.0  # no stamp: the read's time
+    assert arrival([(socket.SOL_SOCKET, 29, stamp)], mono=50.0, real=1000.75) == 50.0  # another message
+
+
+def unicast_server():
+    return FakeServer(lambda packet, sender: [server_info(V3_0)]
+                      if nn.peek_message_id(packet) == MessageId.CONNECT else [])
+
+
+def test_pulling_takes_the_waiting_frames_with_their_arrival_and_starts_no_thread():
+    """Frames wait in the socket until a read; each keeps the time it arrived, not the
+    read's (what a tick takes for the pose's age), and no thread is started for them."""
+    with unicast_server() as server:
+        threads = threading.active_count()
+        taken = []
+        with NatNetClient(unicast_options(server, pull=True),
+                          on_frame=lambda frame, received_s: taken.append((frame.frame_number, received_s))) as client:
+            assert client.thread_id is None and threading.active_count() == threads
+            # Linux turns its receive stamps on for the whole host a moment after the
+            # first socket asks (a deferred switch): a first frame waits for it.
+            server.send(frame_packet(1), client.local_address)
+            assert client.wait_for_frames(1, timeout_s=5.0)
+            time.sleep(0.2)
+            sent = time.monotonic()
+            for number in (2, 3, 4):
+                server.send(frame_packet(number), client.local_address)
+            time.sleep(0.3)
+            sample = client.latest(2)
+            read = time.monotonic()
+            assert sample.frame_number == 4
+            assert sent - 0.01 <= sample.received_s <= sent + 0.1  # arrived when sent, 0.3 s before the read
+            assert read - sample.received_s >= 0.2
+            assert [number for number, _ in taken] == [1, 2, 3, 4]
+            assert all(sent - 0.01 <= t <= sent + 0.1 for _, t in taken[1:])
+            assert client.stats().decoded == 4 and client.pump() == 0  # nothing more waiting
+
+
+def test_pulling_with_decode_on_read_decodes_only_the_newest():
+    with unicast_server() as server:
+        with NatNetClient(unicast_options(server, pull=True, decode_on_read=True)) as client:
+            for number in range(1, 11):
+                server.send(frame_packet(number), client.local_address)
+            assert client.wait_for_frames(1, timeout_s=5.0)
+            time.sleep(0.1)
+            assert client.latest(1).frame_number == 10
+            stats = client.stats()
+            assert stats.received >= 10 and stats.skipped == 10 - stats.decoded and stats.dropped == 0
+
+
+def test_pulling_does_the_unicast_duties_as_it_reads():
+    """KEEPALIVE and the reconnect go out from the reads; with nobody reading, nothing does."""
+    with unicast_server() as server:
+        options = unicast_options(server, pull=True, keepalive_interval_s=0.05, reconnect_after_s=0.3)
+        with NatNetClient(options) as client:
+            time.sleep(0.4)  # nobody reads
+            assert not server.wait_for(MessageId.KEEPALIVE, timeout_s=0.0)
+            deadline = time.monotonic() + 5.0
+            while time.monotonic() < deadline and not (
+                    server.wait_for(MessageId.KEEPALIVE, count=3, timeout_s=0.0)
+                    and server.wait_for(MessageId.CONNECT, count=2, timeout_s=0.0)):
+                client.stats()  # a read
+                time.sleep(0.02)
+            assert server.wait_for(MessageId.KEEPALIVE, count=3, timeout_s=0.0)
+            assert server.wait_for(MessageId.CONNECT, count=2, timeout_s=0.0)  # silence: connect again
+        assert server.wait_for(MessageId.DISCONNECT)
+
+
+def test_a_pulling_client_survives_a_bad_datagram_and_a_close_under_a_reader():
+    with unicast_server() as server:
+        client = NatNetClient(unicast_options(server, pull=True)).start()
+        server.send(b"\x07\x00\xff\xff", client.local_address)  # a frame header promising more than it has
+        server.send(frame_packet(1), client.local_address)
+        assert client.wait_for_frames(1, timeout_s=5.0)
+        assert client.stats().rejected_total == 1
+        reader = threading.Thread(target=lambda: client.wait_for_frames(100, timeout_s=5.0))
+        reader.start()
+        time.sleep(0.1)
+        client.close()
+        reader.join(2.0)
+        assert not reader.is_alive()  # the waiting reader saw the socket go
+        assert client.pump() == 0 and client.latest(1) is not None
+
+
 @pytest.mark.parametrize("info, match", [(server_info(V3_0, multicast=True), "multicast"),
                                          (server_info(Version(5, 0)), "5.0")])
 def test_server_info_that_the_client_cannot_use(info, match):
@@ -351,12 +440,13 @@ def test_pinned_version_overrides_the_server():
             assert client.wait_for_frames(1, timeout_s=5.0)
 
 
-def test_multicast_without_handshake_replays_the_captured_session(traffic, multicast_group):
+@pytest.mark.parametrize("pull", [False, True])
+def test_multicast_without_handshake_replays_the_captured_session(traffic, multicast_group, pull):
     group, port = multicast_group
     frames = [d.payload for d in traffic if d.dst_port == 1511]
     options = NatNetClientOptions(multicast=True, handshake=False, natnet_version=V3_0,
                                   multicast_group=group, data_port=port,
-                                  local_address="127.0.0.1")
+                                  local_address="127.0.0.1", pull=pull)
     sender = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     sender.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, socket.inet_aton("127.0.0.1"))
     sender.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_LOOP, 1)

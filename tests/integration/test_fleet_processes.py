@@ -51,7 +51,10 @@ def test_four_car_processes_reach_their_goals_without_breach(honest):
         assert driving["wall_s"] > 1.0, driving
         assert driving["sections"]["replan"] > 0 and driving["sections"]["messages"] > 0, driving
         assert driving["threads"]["main"] >= sum(driving["sections"].values()) - 0.05, driving
-        assert driving["command_loop"]["main"] > 0 and driving["threads"]["natnet"] > 0, driving
+        assert driving["command_loop"]["main"] > 0 and driving["sections"]["frames"] > 0, driving
+        # Both NatNet clients are pulled by their readers: no socket thread works (the car
+        # process's would show as "natnet", the command loop's as its "other").
+        assert driving["threads"]["natnet"] == 0 and driving["command_loop"]["other"] == 0, driving
     assert summary["cpu"]["mocap-sim"]["cpu_s"] > 0 and summary["cpu"]["launcher"]["cpu_s"] > 0
     machine = summary["machine"]
     assert machine["cores"] >= 1 and 0.0 < machine["busy_cores"] <= machine["cores"] + 0.1, machine

@@ -183,7 +183,7 @@ class Collector:
     def __init__(self):
         self.frames = []
 
-    def __call__(self, frame):
+    def __call__(self, frame, received_s):
         self.frames.append(frame)
 
 
