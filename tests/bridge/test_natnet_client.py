@@ -12,8 +12,13 @@ import pytest
 
 from trustfg.bridge import natnet as nn
 from trustfg.bridge.natnet import V3_0, V4_1, Frame, MessageId, RigidBody, Version
-from trustfg.bridge.natnet_client import (FrameReceiver, NatNetClient, NatNetClientOptions, NatNetConnectionError,
-                                         arrival)
+from trustfg.bridge.natnet_client import (
+    FrameReceiver,
+    NatNetClient,
+    NatNetClientOptions,
+    NatNetConnectionError,
+    arrival,
+)
 
 POSE = ((0.5, 0.25, -1.0), (0.0, 0.0, 0.0, 1.0))
 
