@@ -86,13 +86,13 @@ class LiveSource:
                 view.update(message, received.at)
                 if self.operator is not None:
                     self.operator.session.heard(message, received.at)
-        for car, up in list(self.bus.alive.items()):
+        for car, up in self.bus.on_bus().items():
             view.liveliness(car, up)
         view.now = max(view.now, time.time())
 
     def status(self) -> dict:
         return {"mode": "live", "bus": self.bus.counters.get("liveliness_up", 0) > 0,
-                "alive": sorted(c for c, up in self.bus.alive.items() if up),
+                "alive": sorted(c for c, up in self.bus.on_bus().items() if up),
                 "dropped": dict(self.inbox.dropped),
                 "operator": self.operator.status() if self.operator is not None else {"enabled": False}}
 

@@ -144,7 +144,7 @@ def gather(fleet: Scenario, wait_s: float, listen: tuple[str, ...], use_natnet: 
             for car, answer in stopper.answers.items():
                 seen[car].answer = answer
                 seen[car].rtt_ms = (stopper.answered_at[car] - answer.stamp_s) * 1e3
-            for car, up in bus.alive.items():
+            for car, up in bus.on_bus().items():
                 if car in seen:
                     seen[car].alive = up
             for car in seen:

@@ -212,12 +212,17 @@ def run(scenario: Scenario, out: Path, seed: int = 0, timeout_s: float | None = 
                 ids = [c.id for c in scenario.cars]
                 print(f"trustfg sim: {len(ids)} cars, waiting for them to come up ...", flush=True)
                 deadline = time.monotonic() + READY_TIMEOUT_S + 5 * len(ids)
-                while not stop.is_set() and not all(bus.alive.get(i) and i in recorder.status for i in ids):
+                # On the bus (its token up, or heard though its token never reached us:
+                # OperatorSession.alive) and its status in.
+                def missing() -> list[int]:
+                    alive = operator.alive()
+                    return [i for i in ids if not (i in alive and i in recorder.status)]
+
+                while not stop.is_set() and missing():
                     recorder.poll()
                     operator.step()
                     if processes.crashed() or time.monotonic() > deadline:
-                        missing = [i for i in ids if not (bus.alive.get(i) and i in recorder.status)]
-                        raise RuntimeError(f"cars {missing} did not come up (crashed: {processes.crashed()})")
+                        raise RuntimeError(f"cars {missing()} did not come up (crashed: {processes.crashed()})")
                     time.sleep(0.05)
                 # The go comes no sooner than sim.settle_s after the last car came up: strangers
                 # still, cars would plan around each other with the widest epsilon.

@@ -78,8 +78,9 @@ class OperatorSession:
             self.stopper.step(now)
 
     def alive(self) -> list[int]:
-        """Car processes on the bus now (their liveliness tokens)."""
-        return sorted(car for car, up in self.bus.alive.items() if up and car in self.cars)
+        """Car processes on the bus now: their liveliness token is up, or it never reached
+        us but we hear them (fleet.bus.present)."""
+        return sorted(car for car, up in self.bus.on_bus().items() if up and car in self.cars)
 
     # --- what it says -------------------------------------------------------------------
 

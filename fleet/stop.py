@@ -147,7 +147,7 @@ def _wait_alive(bus, cars: list[int], timeout_s: float) -> None:
     publishes the moment it opens reaches only the peers it is already connected to; the
     others get the message later, from the cache, when their subscribers query it."""
     deadline = time.monotonic() + timeout_s
-    while not all(bus.alive.get(car) for car in cars) and time.monotonic() < deadline:
+    while not all(bus.on_bus().get(car) for car in cars) and time.monotonic() < deadline:
         bus.wait(0.01)
         bus.drain()
 

@@ -280,6 +280,34 @@ def test_a_car_heard_without_a_token_is_on_the_bus_and_watched(monkeypatch):
         assert wait_for(lambda: one.on_bus().get(9) is False, 3.0)  # silent: off the bus
 
 
+def test_the_operator_counts_a_car_heard_without_a_token_as_on_the_bus():
+    """The launcher's "came up", ``trustfg go``'s "ready" and the dashboard ask the
+    operator's session which cars are on the bus: a car whose token never reached the
+    operator, but that it hears, is (a process run once waited for such a car's token
+    and gave up on a fleet that was plainly there)."""
+    import zenoh
+
+    from trustfg.agent.scenario_files import load_scenario
+    from trustfg.fleet.operator import OperatorSession
+    a = endpoint()
+    with FleetBus(BusConfig(listen=(a,)), FLEET, None) as observer:
+        session = OperatorSession(load_scenario("circle-4"), observer, direct=False)
+        config = zenoh.Config()
+        config.insert_json5("mode", json.dumps("peer"))
+        config.insert_json5("connect/endpoints", json.dumps([a]))
+        config.insert_json5("scouting/multicast/enabled", "false")
+        car = zenoh.open(config)  # car 3, publishing without a liveliness token
+        try:
+            deadline = time.monotonic() + 5.0
+            while time.monotonic() < deadline and session.alive() != [3]:
+                car.put(f"trustfg/{FLEET}/3/status", status_of(3))
+                observer.drain()
+                time.sleep(0.05)
+            assert session.alive() == [3] and 3 not in observer.alive
+        finally:
+            car.close()
+
+
 def status_of(car: int) -> bytes:
     return messages.encode(messages.StatusMessage(car, 1, time.time(), "driving", 1.0, 1, False, {}, 1))
 
