@@ -225,11 +225,13 @@ SATURATED = 0.9
 arrival was starved: its replan times and arrivals measure the machine, not the planner."""
 
 
-def machine_load(cpu: dict[str, dict | None], cores: int) -> dict:
-    """How busy the run kept the machine from the go to the first arrival: ``busy_cores``
-    (the processes' shares of one core, summed), ``cores``, and ``saturated``."""
-    busy = sum((entry or {}).get("share_go_first_arrival") or 0.0 for entry in cpu.values())
-    return {"busy_cores": round(busy, 2), "cores": cores, "saturated": busy >= SATURATED * cores}
+def machine_load(cpu: dict[str, dict | None], cores: int, until: str = "first_arrival") -> dict:
+    """How busy the run kept the machine from the go ``until`` a mark (the first arrival;
+    "end" for a run in which no car arrived, the most starved kind): ``busy_cores`` (the
+    processes' shares of one core over that window, ``share_go_<until>``, summed),
+    ``cores``, ``saturated`` and ``until``."""
+    busy = sum((entry or {}).get(f"share_go_{until}") or 0.0 for entry in cpu.values())
+    return {"busy_cores": round(busy, 2), "cores": cores, "saturated": busy >= SATURATED * cores, "until": until}
 
 
 def usable_cores() -> int:

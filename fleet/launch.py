@@ -255,7 +255,7 @@ def run(scenario: Scenario, out: Path, seed: int = 0, timeout_s: float | None = 
                               flush=True)
                     time.sleep(0.05)
                 crashed_early = processes.crashed()
-                processes.cpu.sample()
+                processes.cpu.sample(mark="end")
                 recorder.poll()
             finally:
                 if on_end is not None:
@@ -275,7 +275,10 @@ def run(scenario: Scenario, out: Path, seed: int = 0, timeout_s: float | None = 
             print(f"trustfg sim: the observer's Zenoh session did not close cleanly: {summary['observer_close']}",
                   file=sys.stderr, flush=True)
         summary["cpu"] = processes.cpu.summary("go", "first_arrival")
-        summary["machine"] = machine_load(summary["cpu"], usable_cores())
+        # From the go to the first arrival; with no car in, to the end of the run (a run
+        # in which no car arrived is the most starved, not the least).
+        until = "first_arrival" if "first_arrival" in processes.cpu.marks else "end"
+        summary["machine"] = machine_load(processes.cpu.summary("go", until), usable_cores(), until)
         summary["t_go"] = t_go  # the go, on the clock of the messages' stamps (None: no go)
     finally:
         processes.stop()

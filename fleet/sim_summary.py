@@ -161,8 +161,10 @@ def print_summary(summary: dict) -> None:
         for name, c in summary.get("cpu", {}).items()))
     machine = summary.get("machine")
     if machine and machine["saturated"]:
+        window = "the first arrival" if machine.get("until", "first_arrival") == "first_arrival" \
+            else "the end of the run (no car arrived)"
         print(f"the machine was saturated: the processes took {machine['busy_cores']} of its {machine['cores']} "
-              "cores from the go to the first arrival, so the cars were starved -- replan times, lapsed "
+              f"cores from the go to {window}, so the cars were starved -- replan times, lapsed "
               "permits and arrivals measure the machine here, not the planner")
     print(f"messages: {summary['messages']}")
     if "liar_id" in summary:

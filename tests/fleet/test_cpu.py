@@ -129,7 +129,12 @@ def test_a_run_that_fills_the_cores_is_called_saturated():
 
     cpu = {"launcher": {"share_go_first_arrival": 0.05}, "mocap-sim": {"share_go_first_arrival": 0.1},
            **{f"car {i}": {"share_go_first_arrival": 0.22} for i in range(1, 9)}, "car 9": None}
-    assert machine_load(cpu, 2) == {"busy_cores": 1.91, "cores": 2, "saturated": True}
+    assert machine_load(cpu, 2) == {"busy_cores": 1.91, "cores": 2, "saturated": True, "until": "first_arrival"}
     assert machine_load(cpu, 4)["saturated"] is False
     assert machine_load({"car 1": {"share_go_first_arrival": None}}, 2)["busy_cores"] == 0.0  # no go: no window
+    # No car arrived: the window runs from the go to the end, and sixteen starved cars are
+    # saturated (a window that never closed had counted them as an idle machine).
+    starved = {f"car {i}": {"share_go_first_arrival": None, "share_go_end": 0.115} for i in range(1, 17)}
+    assert machine_load(starved, 2)["busy_cores"] == 0.0
+    assert machine_load(starved, 2, "end") == {"busy_cores": 1.84, "cores": 2, "saturated": True, "until": "end"}
     assert 1 <= usable_cores() <= (os.cpu_count() or 1)
