@@ -149,7 +149,10 @@ def test_the_live_page_draws_the_published_poses_trust_and_alerts(live_run):
             assert len(cells) == 12
             for a, b, shown in cells:
                 said = [v for t, v in published.trust[(a, b)] if t > time.time() - 3.0]
-                assert said and min(abs(shown - v) for v in said) < 1e-3, (a, b, shown, said)
+                # On a miss, say how old the shown value is (when the truster said it, if ever).
+                ages = [round(time.time() - t, 2) for t, v in published.trust[(a, b)] if abs(shown - v) < 1e-3]
+                assert said and min(abs(shown - v) for v in said) < 1e-3, \
+                    (a, b, shown, said, f"shown value said {ages or 'never'} s ago")
             # The liar: honest cars' low trust in car 1 raises the alert.
             page.wait_for_selector(".alert[data-kind='low_trust'][data-cars='2,1']", timeout=30000)
             page.click("circle.car-body[data-car='2']")
