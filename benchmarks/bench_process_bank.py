@@ -27,13 +27,9 @@ from pathlib import Path
 
 from trustfg.agent.scenario_files import load_scenario
 from trustfg.fleet.launch import loopback_fleet, run
+from trustfg.fleet.stats import least_pair_clearance
 
 SCENES = ["circle-8", "circle-obstacles-8", "warehouse-8"]
-
-
-def least_between_cars(summary: dict) -> float:
-    matrix = summary["min_clearance"]
-    return min(matrix[i][j] for i in range(len(matrix)) for j in range(len(matrix)) if i != j)
 
 
 def line(name: str, seed: int, s: dict) -> str:
@@ -41,7 +37,7 @@ def line(name: str, seed: int, s: dict) -> str:
     replans = [r["p95"] for r in s["replan_ms"].values() if r]
     makespan = f"{s['makespan_s']:.1f} s" if s["makespan_s"] else "-"
     return (f"{name:>20} {seed:>4} {sum(s['reached_goal'])}/{len(s['reached_goal'])} "
-            f"breaches {len(s['breaches'])} least {least_between_cars(s):.3f} m walls {s['obstacle_min_clearance']:.3f} m "
+            f"breaches {len(s['breaches'])} least {least_pair_clearance(s):.3f} m walls {s['obstacle_min_clearance']:.3f} m "
             f"makespan {makespan} Hz >= {min(c['rate_hz'] for c in control):.2f} "
             f"late p99 <= {max(c['jitter_ms_p99'] for c in control):.2f} ms replan p95 <= {max(replans, default=0):.0f} ms "
             f"lapsed {sum(c.get('lease_lapsed', 0) for c in control)} busy {s['machine']['busy_cores']:.2f} "
@@ -61,7 +57,7 @@ def totals(summaries: list[dict], not_started: list[str]) -> str:
         f"runs {len(summaries)} (+{len(not_started)} that did not start: {', '.join(not_started) or 'none'}); "
         f"every car at goal in {sum(all(s['reached_goal']) for s in summaries)}; "
         f"cars at goal {sum(sum(s['reached_goal']) for s in summaries)} of {sum(len(s['reached_goal']) for s in summaries)}",
-        f"breaches {sum(len(s['breaches']) for s in summaries)}, least clearance {min(map(least_between_cars, summaries)):.3f} m; "
+        f"breaches {sum(len(s['breaches']) for s in summaries)}, least clearance {min(map(least_pair_clearance, summaries)):.3f} m; "
         f"walls {min(s['obstacle_min_clearance'] for s in summaries):.3f} m; crashes {sum(bool(s['crashed']) for s in summaries)}",
         f"commands {min(c['rate_hz'] for c in control):.2f}-{max(c['rate_hz'] for c in control):.2f} Hz, "
         f"lateness p99 <= {max(c['jitter_ms_p99'] for c in control):.2f} ms; "
