@@ -26,7 +26,8 @@ receiver a fuses testimonies about peer b as dependent evidence:
     b_ar = alpha/(alpha + beta + 2) of r's weakest dimension;
   * deviation test (Buchegger & Le Boudec): once a holds ``testimony_min_evidence`` about
     b, a testimony whose expected value differs from a's own by more than
-    ``testimony_deviation`` is rejected and counted;
+    ``testimony_deviation`` is rejected and counted (once per testimony and peer, however
+    often it is fused again before the reporter's next one: ``testimonies_rejected``);
   * averaging, not adding: the accepted testimonies are averaged (dependent sources), and
     only their surplus over a's own amount of evidence is added to it -- a testimony
     speaks only for what a could not see itself (a partition, a late join);
@@ -114,6 +115,9 @@ class TrustBook:
     testimonies: dict[int, tuple[TrustReport, float]] = field(default_factory=dict)
     """The latest testimony of each reporter and when it arrived."""
     counters: Counter = field(default_factory=Counter)
+    _rejected: dict = field(default_factory=dict, repr=False)
+    """(reporter, peer) -> the report (its seq and stamp) last counted as rejected: a
+    testimony is fused again at every read until the next one comes, and counted once."""
     _fused: dict = field(default_factory=dict, repr=False)
     """fused() per (peer, now) and discount() per (reporter, now), until the next
     evidence or testimony: a tick's replan and report read every peer's fusion, and
@@ -180,13 +184,14 @@ class TrustBook:
         self._decay(own, now)
         own_tau = own.tau()
         own_amount = (own.alpha - c.prior_alpha) + (own.beta - c.prior_beta)
-        weights, said, ages = [], [], []
+        weights, said, ages, sources = [], [], [], []
         for reporter, (report, arrived) in self.testimonies.items():
             if reporter in (peer, self.owner) or peer not in report.peers:
                 continue
             weight = self.discount(reporter, now)
             if weight <= 0.0:
                 continue
+            sources.append((reporter, report.seq, report.stamp))
             weights.append(weight)
             said.append((report.peers[peer].alpha, report.peers[peer].beta))
             ages.append(c.forgetting ** max(0.0, now - arrived))
@@ -199,7 +204,10 @@ class TrustBook:
         r, s = r * scale * age, s * scale * age
         said_tau = expected(r + c.prior_alpha, s + c.prior_beta)
         deviates = (own_amount >= c.testimony_min_evidence) & (np.abs(said_tau - own_tau) > c.testimony_deviation)
-        self.counters["testimonies_rejected"] += int(np.sum(deviates))
+        for (reporter, seq, stamp), rejected in zip(sources, np.any(deviates, axis=1)):
+            if rejected and self._rejected.get((reporter, peer)) != (seq, stamp):
+                self._rejected[(reporter, peer)] = (seq, stamp)
+                self.counters["testimonies_rejected"] += 1
         use = ~deviates
         count = np.maximum(np.sum(use.astype(float), axis=0), 1.0)
         r_said = np.sum(np.where(use, weight * r, 0.0), axis=0) / count  # averaged: dependent sources

@@ -113,6 +113,24 @@ def test_lying_testimonies_do_not_sink_an_honest_peer():
     assert book.counters["testimonies_rejected"] > 0
 
 
+def test_a_rejected_testimony_is_counted_once_however_often_it_is_fused():
+    """A testimony is fused again at every read (each replan and report) until the
+    reporter's next one: the counter counts testimonies, not reads."""
+    book = trusted_book()
+    for k in range(40):
+        book.record(3, TRANSPARENCY, 0.0, 1.0, 4.0 + 0.1 * k)
+    honest = TrustReport(2, 1, 8.0, {4: PeerTrust((30.0,) * 3, (0.0,) * 3, (0.97,) * 3, 0.97, 0.45)})
+    slander = Liar(3, AttackConfig("false-testimony"), np.random.default_rng(0)).testimony(honest)
+    book.receive(TrustReport(3, 1, 8.0, slander.peers))
+    for k in range(20):  # twenty reads at twenty moments
+        book.tau(4, 8.0 + 0.05 * k)
+    assert book.counters["testimonies_rejected"] == 1
+    book.receive(TrustReport(3, 2, 9.0, slander.peers))  # the slanderer's next report
+    for k in range(5):
+        book.epsilon(4, 9.0 + 0.05 * k, 0.45, transparency=True)
+    assert book.counters["testimonies_rejected"] == 2
+
+
 def test_self_testimony_and_testimony_about_the_receiver_are_ignored():
     book = trusted_book()
     before = book.tau(2, 4.0).copy()
