@@ -27,7 +27,9 @@ holding a fixed JacobianFactor -- so linearising, evaluating and solving cost wh
 alone costs. Our interval checks are chunked, several consecutive intervals per factor
 (``PlannerConfig.intervals_per_factor``, agent.interval_factors), so the floor is chunked
 the same way: one native factor per chunk, on the chunk's keys, dense over them with the
-chunk's rows, as GTSAM holds ours. "x floor" is our time per iteration over the floor's.
+chunk's rows, as GTSAM holds ours. "x floor" is our time per iteration over the floor's:
+the two are timed in turns and the median of the turns' ratios is printed
+(``lm_iterations_paired``).
 """
 
 from __future__ import annotations
@@ -119,15 +121,29 @@ def native_floor_graph(request, config, sdf, t0, dt):
     return graph
 
 
-def lm_iteration_ms(make_graph, values, lambda_initial, repeats):
-    """Median wall time of one Levenberg-Marquardt iteration (``iterate()``: linearise,
-    damped solve, error at the new point) from ``values``, on a fresh optimizer each time
-    (the constructor's error evaluation is not timed). Asserts that LM's first trial step
-    was accepted, so that ours and the floor time the same work."""
-    optimizers = [gtsam.LevenbergMarquardtOptimizer(make_graph(), values, lm_params(lambda_initial))
-                  for _ in range(repeats)]
-    times, _ = timed(lambda: optimizers.pop().iterate(), repeats)
-    return times
+def lm_iterations_paired(ours_graph, floor_graph, values, lambda_initial, repeats):
+    """One Levenberg-Marquardt iteration (``iterate()``: linearise, damped solve, error at
+    the new point) from ``values`` of our graph and of the floor's, on fresh optimizers
+    (the constructors' error evaluation is not timed), timed in turns: ours, the floor's,
+    ours, ... Returns the medians (wall, CPU ms) of ours and of the floor's, and the median
+    of each turn's ratio (wall, CPU): on a machine whose speed drifts from one moment to
+    the next, the two of a pair see the same machine, so the ratio is steadier than the
+    ratio of two medians taken a tenth of a second apart."""
+    def optimizers(make_graph):
+        return [gtsam.LevenbergMarquardtOptimizer(make_graph(), values, lm_params(lambda_initial))
+                for _ in range(repeats)]
+    ours, floor = optimizers(ours_graph), optimizers(floor_graph)
+    times = {"ours": ([], []), "floor": ([], [])}
+    for _ in range(repeats):
+        for name, pool in (("ours", ours), ("floor", floor)):
+            (wall, cpu), _ = timed(pool.pop().iterate, 1)
+            times[name][0].append(wall)
+            times[name][1].append(cpu)
+    (ours_wall, ours_cpu), (floor_wall, floor_cpu) = times["ours"], times["floor"]
+    ratio = (statistics.median(a / b for a, b in zip(ours_wall, floor_wall)),
+             statistics.median(a / b for a, b in zip(ours_cpu, floor_cpu) if b > 0))
+    return ((statistics.median(ours_wall), statistics.median(ours_cpu)),
+            (statistics.median(floor_wall), statistics.median(floor_cpu)), ratio)
 
 
 def lm_params(lambda_initial):
@@ -212,14 +228,13 @@ def run(n_states: int, n_peers: int, repeats: int) -> dict:
     ours_graph = lambda: build_graph(request, config, sdf, t0, dt)  # noqa: E731
     floor_graph = lambda: native_floor_graph(request, config, sdf, t0, dt)  # noqa: E731
     assert first_step_accepted(ours_graph, values, lam) and first_step_accepted(floor_graph, values, lam)
-    ours = lm_iteration_ms(ours_graph, values, lam, repeats * 4)
-    floor = lm_iteration_ms(floor_graph, values, lam, repeats * 4)
+    ours, floor, ratio = lm_iterations_paired(ours_graph, floor_graph, values, lam, repeats * 4)
     return {"N": n_states, "peers": n_peers, "left_out": plain.peers_out_of_reach, "cold_ms": cold_ms,
             "cold_iterations": cold.result.iterations,
             "warm_ms": (statistics.median(warm_wall), statistics.median(warm_cpu)),
             "warm_iterations": statistics.median(iterations), "verify_ms": verify_ms,
             "plan_only_ms": (plan_only_ms[0], statistics.median(warm_plan_only)), "outcomes": dict(outcomes),
-            "ours_iter_ms": ours, "floor_iter_ms": floor}
+            "ours_iter_ms": ours, "floor_iter_ms": floor, "x_floor": ratio}
 
 
 def main() -> None:
@@ -234,7 +249,7 @@ def main() -> None:
     for n, peers in ((21, 3), (41, 3), (41, 15)):
         r = run(n, peers, args.repeats)
         pair = lambda x, f: f"{x[0]:{f}}/{x[1]:{f}}"  # noqa: E731
-        ratio = (r["ours_iter_ms"][0] / r["floor_iter_ms"][0], r["ours_iter_ms"][1] / r["floor_iter_ms"][1])
+        ratio = r["x_floor"]
         print(f"{r['N']:>3} {r['peers']:>5} {r['left_out']:>5} {pair(r['cold_ms'], '.1f'):>11} "
               f"{r['cold_iterations']:>7} {pair(r['warm_ms'], '.1f'):>9} {r['warm_iterations']:>7.0f} "
               f"{pair(r['verify_ms'], '.2f'):>9} {pair(r['plan_only_ms'], '.1f'):>9} "
