@@ -278,7 +278,8 @@ def run(scenario: Scenario, out: Path, seed: int = 0, timeout_s: float | None = 
         # From the go to the first arrival; with no car in, to the end of the run (a run
         # in which no car arrived is the most starved, not the least).
         until = "first_arrival" if "first_arrival" in processes.cpu.marks else "end"
-        summary["machine"] = machine_load(processes.cpu.summary("go", until), usable_cores(), until)
+        window = summary["cpu"] if until == "first_arrival" else processes.cpu.summary("go", until)
+        summary["machine"] = machine_load(window, usable_cores(), until)
         summary["t_go"] = t_go  # the go, on the clock of the messages' stamps (None: no go)
     finally:
         processes.stop()
