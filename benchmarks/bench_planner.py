@@ -133,13 +133,8 @@ def lm_iterations_paired(ours_graph, floor_graph, values, lambda_initial, repeat
         return [gtsam.LevenbergMarquardtOptimizer(make_graph(), values, lm_params(lambda_initial))
                 for _ in range(repeats)]
     ours, floor = optimizers(ours_graph), optimizers(floor_graph)
-    times = {"ours": ([], []), "floor": ([], [])}
-    for _ in range(repeats):
-        for name, pool in (("ours", ours), ("floor", floor)):
-            (wall, cpu), _ = timed(pool.pop().iterate, 1)
-            times[name][0].append(wall)
-            times[name][1].append(cpu)
-    (ours_wall, ours_cpu), (floor_wall, floor_cpu) = times["ours"], times["floor"]
+    turns = [(*timed(ours.pop().iterate, 1)[0], *timed(floor.pop().iterate, 1)[0]) for _ in range(repeats)]
+    ours_wall, ours_cpu, floor_wall, floor_cpu = zip(*turns)
     ratio = (statistics.median(a / b for a, b in zip(ours_wall, floor_wall)),
              statistics.median(a / b for a, b in zip(ours_cpu, floor_cpu) if b > 0))
     return ((statistics.median(ours_wall), statistics.median(ours_cpu)),
