@@ -51,6 +51,7 @@ import numpy as np
 
 from ..agent.config import ConfigError, Scenario
 from ..agent.scenario_files import read_source, scenario_from_dict
+from . import bank_recheck, environment
 from .command import command_parser, configured
 from .experiments import BELIEVING, NO_TRUST, Progress, _sdf
 from .fleet_sim import simulate
@@ -215,7 +216,7 @@ def run_bank(scenes: dict[str, tuple[dict, str]], methods: list[str], seeds: dic
                     tasks.append((scene, scenario, method, seed))
     if not run_missing:
         missing = Counter(method for _, _, method, _ in tasks)
-        print(f"{len(runs)} runs of the selection in {journal}; not in it, not run (--report-only): "
+        print(f"{len(runs)} runs of the selection in {journal}; not in it (none run now): "
               + (", ".join(f"{method} {n}" for method, n in missing.items()) or "none"), file=sys.stderr)
         tasks = []
     elif runs:
@@ -223,12 +224,13 @@ def run_bank(scenes: dict[str, tuple[dict, str]], methods: list[str], seeds: dic
     if tasks:  # nothing to run (a whole journal, or --report-only): no pool, and the journal untouched
         tasks.sort(key=lambda task: -len(task[1].cars))  # the big scenes first: the pool ends together
         progress = Progress("bank", len(tasks))
-        code = code_version()
+        code, env = code_version(), environment.digest(environment.environment())
         with journal.open("a") as log:
             for task, run in parallel(_case, tasks, jobs, ordered=False):
                 run["group"] = groups[run["scene"]]
                 run["fingerprint"] = fingerprint(task[1])
                 run["code"] = code
+                run["env"] = env
                 log.write(json.dumps(run) + "\n")
                 log.flush()
                 runs.append(run)
@@ -238,6 +240,42 @@ def run_bank(scenes: dict[str, tuple[dict, str]], methods: list[str], seeds: dic
     runs.sort(key=lambda r: (r["group"] != "bank", list(scenes).index(r["scene"]), list(METHODS).index(r["method"]),
                              r["seed"]))
     return runs
+
+
+def recheck(scenes: dict[str, tuple[dict, str]], methods: list[str], seeds: dict[str, list[int]], settings: dict,
+            groups: dict[str, str], out: Path, count: int, jobs: int) -> int:
+    """Rerun ``count`` of the journal's runs of the selection here; each compared with its
+    entry (fleet.bank_recheck), the lot written to OUT/recheck.json. 0 when every rerun is
+    its entry to the last digit, 1 when one is not, 2 when the journal has none."""
+    runs = run_bank(scenes, methods, seeds, jobs, settings, groups, out / "runs.jsonl", run_missing=False)
+    if not runs:
+        print(f"trustfg experiment bank: no run of this selection in {out / 'runs.jsonl'} to recheck", file=sys.stderr)
+        return 2
+    chosen = {(r["scene"], r["method"], r["seed"]): r for r in bank_recheck.pick(runs, count)}
+    tasks = [(scene, variant(scenes[scene][0], METHODS[method].overrides, settings), method, seed)
+             for scene, method, seed in chosen]
+    env = environment.environment()
+    here = environment.digest(env)
+    print(f"rerunning {len(tasks)} of the journal's {len(runs)} runs here (code {code_version()}, env {here})",
+          file=sys.stderr)
+    progress = Progress("recheck", len(tasks))
+    rechecked = []
+    for task, rerun in parallel(_case, tasks, jobs, ordered=False):
+        entry = chosen[(task[0], task[2], task[3])]
+        changed = bank_recheck.differences(entry, rerun)
+        rechecked.append({"scene": task[0], "method": task[2], "seed": task[3], "same": not changed,
+                          "differences": changed, "journal": {f: entry.get(f) for f in ("code", "env", *bank_recheck.FIELDS)},
+                          "rerun": {f: rerun.get(f) for f in bank_recheck.FIELDS}})
+        progress.step(bank_recheck.line(entry, rerun, here))
+        if changed and progress.tty:
+            print(file=sys.stderr)  # a rerun that differs keeps its line
+    progress.done()
+    same = sum(r["same"] for r in rechecked)
+    (out / "recheck.json").write_text(json.dumps({"code": code_version(), "env": here, "environment": env,
+                                                  "same": same, "rechecked": rechecked}, indent=1))
+    print(f"{same} of {len(rechecked)} reruns the same as their journal entries to the last digit; "
+          f"wrote {(out / 'recheck.json').resolve()}")
+    return 0 if same == len(rechecked) else 1
 
 
 def fingerprint(scenario: Scenario) -> str:
@@ -296,7 +334,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--report-only", action="store_true",
                         help="run nothing: the table and figure of the runs of --out's journal that match the "
                              "selection (how many are missing is said)")
+    parser.add_argument("--recheck", type=int, default=0, metavar="K",
+                        help="run nothing new: rerun K of the journal's runs of the selection (drawn with a fixed "
+                             "seed) and say which came out the same; exit 1 when one did not")
     args = parser.parse_args(argv)
+    if args.recheck < 0:
+        parser.error("--recheck must be at least 0")
     if args.seeds < 1 or args.fresh < 0 or args.fresh_seeds < 1:
         parser.error("--seeds and --fresh-seeds must be at least 1, --fresh at least 0")
     if "orca" in args.methods:
@@ -341,6 +384,8 @@ def main(argv: list[str] | None = None) -> int:
         scenes[data["name"]] = (data, note)
         groups[data["name"]] = "fresh"
         seeds[data["name"]] = list(range(args.seed, args.seed + args.fresh_seeds))
+    if args.recheck:
+        return recheck(scenes, args.methods, seeds, settings, groups, out, args.recheck, args.jobs)
     started = time.perf_counter()
     if not args.report_only:  # a report of a folder that holds no journal leaves nothing behind
         out.mkdir(parents=True, exist_ok=True)
@@ -359,9 +404,11 @@ def main(argv: list[str] | None = None) -> int:
         "experiment": "bank",
         "command": "trustfg experiment bank " + " ".join(argv if argv is not None else sys.argv[1:]),
         "machine": machine(),
+        "environment": environment.environment(),
         "wall_time_s": None if args.report_only else round(time.perf_counter() - started, 1),
         "cpu_time_s": round(sum(r.get("cpu_s", 0.0) for r in runs), 1),
         "code": dict(Counter(r.get("code", "not recorded") for r in runs)),
+        "env": dict(Counter(r.get("env", "not recorded") for r in runs)),
         "methods": {m: {"label": METHODS[m].label, "description": METHODS[m].description} for m in args.methods},
         "scenes": {name: {"group": groups[name], "about": note, "seeds": seeds[name]}
                    for name, (_, note) in scenes.items()},

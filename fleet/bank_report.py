@@ -115,6 +115,8 @@ def markdown(report: dict) -> str:
         + ("the journal's runs, none run now, " if report["wall_time_s"] is None else f"{report['wall_time_s'] / 60:.1f} min, ")
         + f"{report['cpu_time_s'] / 60:.1f} min of CPU time in the runs"
         + (", run on " + ", ".join(f"{code} ({n})" for code, n in report["code"].items()) if report.get("code") else "")
+        + (" in environments " + ", ".join(f"{env} ({n})" for env, n in report["env"].items())
+           + " (fleet.environment)" if report.get("env") else "")
         + ".",
         "Rates in % with 95 % bootstrap intervals; 0 events in n runs: ≤ 3/n (rule of three). Clearances are "
         "between edges (m; a breach is < 0.1 between cars, a contact < 0 to an obstacle); makespan and flowtime "

@@ -127,6 +127,23 @@ def test_the_bank_command_writes_results_and_carries_on_after_a_stop(tmp_path):
     assert nothing.returncode == 2 and "no run of this selection" in nothing.stderr
     assert not (tmp_path / "empty").exists()  # nothing made where nothing was
 
+    # Each run names its environment; a recheck reruns journal entries and finds the one
+    # made to differ (the rest are the same to the last digit: one machine, one environment).
+    env = report["runs"][0]["env"]
+    assert len(env) == 12 and report["env"] == {env: 4} and report["environment"]["packages"]["gtsam"]
+    entries = [json.loads(line) for line in journal.splitlines()]
+    altered = next(e for e in entries if e["method"] == "fixed")
+    altered["least_clearance_m"] += 0.001
+    (tmp_path / "runs.jsonl").write_text("".join(json.dumps(e) + "\n" for e in entries))
+    rechecked = _bank(*args, "--recheck", "9")
+    assert rechecked.returncode == 1, rechecked.stderr
+    assert "3 of 4 reruns the same" in rechecked.stdout
+    lines = [line for line in rechecked.stderr.splitlines() if "DIFFERS" in line]
+    assert len(lines) == 1 and f"{altered['scene']} fixed seed 300" in lines[0] and "least_clearance_m" in lines[0]
+    result = json.loads((tmp_path / "recheck.json").read_text())
+    assert result["same"] == 3 and result["env"] == env
+    assert [r["differences"] for r in result["rechecked"] if not r["same"]] == [["least_clearance_m"]]
+
 
 def test_bad_arguments_end_in_one_line(tmp_path):
     for args in (["--set", "planner.support_states=many"], ["--scenes", "no-such-scene"]):
