@@ -225,6 +225,11 @@ def run_bank(scenes: dict[str, tuple[dict, str]], methods: list[str], seeds: dic
         tasks.sort(key=lambda task: -len(task[1].cars))  # the big scenes first: the pool ends together
         progress = Progress("bank", len(tasks))
         code, env = code_version(), environment.digest(environment.environment())
+        others = Counter(run.get("env", "not recorded") for run in runs if run.get("env") != env)
+        if others:  # carrying on elsewhere: the new runs are runs of their seeds, not replays of the old
+            print("note: the journal's runs of this selection ran in other environments ("
+                  + ", ".join(f"{name}: {n}" for name, n in others.items()) + f"), these run in {env} "
+                  "(fleet.environment): a seed rerun here need not repeat an entry", file=sys.stderr)
         with journal.open("a") as log:
             for task, run in parallel(_case, tasks, jobs, ordered=False):
                 run["group"] = groups[run["scene"]]

@@ -131,9 +131,15 @@ def test_the_bank_command_writes_results_and_carries_on_after_a_stop(tmp_path):
     # made to differ (the rest are the same to the last digit: one machine, one environment).
     env = report["runs"][0]["env"]
     assert len(env) == 12 and report["env"] == {env: 4} and report["environment"]["packages"]["gtsam"]
-    entries = [json.loads(line) for line in journal.splitlines()]
+    entries = [{k: v for k, v in json.loads(line).items() if k != "env"} for line in journal.splitlines()]
     altered = next(e for e in entries if e["method"] == "fixed")
     altered["least_clearance_m"] += 0.001
+    (tmp_path / "runs.jsonl").write_text("".join(json.dumps(e) + "\n" for e in entries))
+    orca = [*wider[:8], *wider[9:]]  # one more seed of ORCA's, beside entries that name no environment
+    carried = _bank(*orca, "--no-figures")
+    assert carried.returncode == 0 and "ran in other environments (not recorded: 2)" in carried.stderr
+    entries = entries + [json.loads(line) for line in (tmp_path / "runs.jsonl").read_text().splitlines()[4:]]
+    assert [e["env"] for e in entries[4:]] == [env] * 2
     (tmp_path / "runs.jsonl").write_text("".join(json.dumps(e) + "\n" for e in entries))
     rechecked = _bank(*args, "--recheck", "9")
     assert rechecked.returncode == 1, rechecked.stderr
