@@ -2,6 +2,7 @@
 
     trustfg experiment bank [--scenes NAME|FILE ...] [--seed S] [--seeds K] [--methods M ...]
                             [--fresh K] [--set SECTION.KEY=VALUE ...] [--jobs J] [--out DIR]
+                            [--report-only | --recheck K]
 
 Per scene and method, every seed is one in-process run (fleet.fleet_sim, or
 fleet.baselines for ORCA) with the same start delays and cruise speeds for every method
@@ -27,6 +28,8 @@ their 95 % bootstrap confidence intervals are in fleet.bank_report.
 ``--fresh K`` adds K random-field scenes made from generator seeds drawn from the
 operating system's entropy at the start of the run (printed and saved in OUT/fresh/, so
 the row can be re-run): scenes nobody tuned on, reported apart from the bank.
+``--recheck K`` reruns K of the journal's runs and says which repeat to the last digit (a
+run repeats only in the environment it was made in: fleet.environment).
 ``--set`` changes a config value of every scene for every method, e.g. to switch a part
 of the pipeline off for an ablation (``--set planner.interp_checks=8``).
 """
@@ -308,13 +311,8 @@ def code_version() -> str:
 
 
 def machine() -> dict:
-    model = ""
-    try:
-        model = next(line.split(":", 1)[1].strip() for line in Path("/proc/cpuinfo").read_text().splitlines()
-                     if line.startswith("model name"))
-    except (OSError, StopIteration):
-        pass
-    return {"cpus": os.cpu_count(), "cpu": model, "platform": platform.platform(), "python": platform.python_version()}
+    return {"cpus": os.cpu_count(), "cpu": environment.cpu_model(), "platform": platform.platform(),
+            "python": platform.python_version()}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -370,8 +368,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.fresh and fresh.is_dir() and any(fresh.glob("*.toml")):
         print(f"reusing the fresh scenes in {fresh}", file=sys.stderr)  # a stopped bank carries on
         paths = sorted(fresh.glob("*.toml"))
-    elif args.fresh and args.report_only:
-        parser.error(f"--report-only with --fresh: no fresh scenes in {fresh} to report on")
+    elif args.fresh and (args.report_only or args.recheck):
+        parser.error(f"--report-only or --recheck with --fresh: no fresh scenes in {fresh} to report on")
     elif args.fresh:
         from .scenes import generate, scene_file_text
         fresh_seeds = [secrets.randbelow(2**31) for _ in range(args.fresh)]
@@ -390,7 +388,11 @@ def main(argv: list[str] | None = None) -> int:
         groups[data["name"]] = "fresh"
         seeds[data["name"]] = list(range(args.seed, args.seed + args.fresh_seeds))
     if args.recheck:
-        return recheck(scenes, args.methods, seeds, settings, groups, out, args.recheck, args.jobs)
+        try:
+            return recheck(scenes, args.methods, seeds, settings, groups, out, args.recheck, args.jobs)
+        except KeyboardInterrupt:
+            print("\nstopped; nothing was written", file=sys.stderr)
+            return 130
     started = time.perf_counter()
     if not args.report_only:  # a report of a folder that holds no journal leaves nothing behind
         out.mkdir(parents=True, exist_ok=True)
