@@ -98,6 +98,15 @@ AROUND_MARGIN_M = 0.05
 inside it)."""
 AROUND_COMFORT_M = 0.1
 """... and this beyond every clearance where the way is wide enough."""
+BACK_S = 1.0
+"""A plan backs away when, this long after now, it is BACK_M further from its goal than
+the car is now."""
+BACK_M = 0.05
+HEAD_ON_LATERAL_M = 0.3
+"""A peer comes head on when it is within its epsilon and this of our straight way to the
+goal, ahead of us, and closing in on us."""
+PASS_MARGIN_M = 0.1
+"""``pass`` puts its via point this beyond the peer's epsilon from the peer's way."""
 
 
 @dataclass(frozen=True)
@@ -152,6 +161,11 @@ def plan_safely(request: PlanRequest, bounds: Bounds, planner: PlannerConfig, co
                              start_speed=float(np.linalg.norm(request.velocity)))
             if verdict.ok:
                 outcome = FIRST if len(tried) == 1 else RETRY
+                if outcome == FIRST and config.pass_head_on:
+                    passed = _pass_head_on(request, result, bounds, retry_planner, sdf, config)
+                    if passed is not None:
+                        tried.append("pass")
+                        return Outcome(passed[0].plan, RETRY, _timed(passed[0], started), passed[1], tuple(tried))
                 return Outcome(result.plan, outcome, _timed(result, started), verdict, tuple(tried),
                                tuple(sorted(blocked)))
             blocked.update(c.peer for c in verdict.conflicts if c.kind == "peer")
@@ -165,6 +179,62 @@ def plan_safely(request: PlanRequest, bounds: Bounds, planner: PlannerConfig, co
     base = last or PlanResult(plan, 0, math.nan, math.nan, 0.0, request.warm_start is not None)
     return Outcome(plan, FALLBACK, _timed(dataclasses.replace(base, plan=plan), started), verdict, tuple(tried),
                    tuple(sorted(blocked)))
+
+
+def backs_away(plan: Plan, request: PlanRequest) -> bool:
+    """Whether ``plan`` is BACK_M further from the goal BACK_S from now than the car is."""
+    here = float(np.linalg.norm(request.position - request.goal))
+    (later,) = plan.position_at(np.array([request.t_now + BACK_S]))
+    return float(np.linalg.norm(later - request.goal)) > here + BACK_M
+
+
+def head_on(request: PlanRequest) -> int | None:
+    """The nearest peer ahead of us on our straight way to the goal (within its epsilon +
+    HEAD_ON_LATERAL_M of it) that closes in on us, as its plan has it now; else None."""
+    way = request.goal - request.position
+    length = float(np.linalg.norm(way))
+    if length < 1e-6:
+        return None
+    along = way / length
+    best = None
+    for i, peer in enumerate(request.peers):
+        (q,), (w,) = peer.plan.state_at(np.array([request.t_now]))
+        ahead = float(along @ (q - request.position))
+        lateral = abs(float(along[0] * (q - request.position)[1] - along[1] * (q - request.position)[0]))
+        closing = float(w @ (request.position - q)) > 0.0
+        if 0.0 < ahead < length and lateral < peer.epsilon + HEAD_ON_LATERAL_M and closing:
+            if best is None or ahead < best[0]:
+                best = (ahead, i)
+    return None if best is None else best[1]
+
+
+def _pass_head_on(request: PlanRequest, backing: PlanResult, bounds: Bounds, planner: PlannerConfig,
+                  sdf: SignedDistanceField, config: VerifyConfig) -> tuple[PlanResult, Verdict] | None:
+    """A plan that passes the peer coming head on, on our right, when ``backing`` backs
+    away in front of it; None when it does not, or no such plan verifies and goes on."""
+    if not backs_away(backing.plan, request):
+        return None
+    index = head_on(request)
+    if index is None:
+        return None
+    peer = request.peers[index]
+    (q,) = peer.plan.position_at(np.array([request.t_now]))
+    along = (request.goal - request.position) / np.linalg.norm(request.goal - request.position)
+    right = np.array([along[1], -along[0]])
+    meet = request.position + along * float(along @ (q - request.position)) * 0.5
+    via = meet + right * (peer.epsilon + PASS_MARGIN_M)
+    if sdf.distance_and_gradient(via)[0] < request.epsilon_obstacle:
+        return None
+    attempt = dataclasses.replace(request, warm_start=None, route=((float(via[0]), float(via[1])),), lane=())
+    try:
+        result = plan_trajectory(attempt, planner, sdf)
+    except PlanningError:
+        return None
+    verdict = verify(result.plan, request.peers, bounds, sdf, config,
+                     start_speed=float(np.linalg.norm(request.velocity)))
+    if not verdict.ok or backs_away(result.plan, request):
+        return None
+    return result, verdict
 
 
 def _timed(result: PlanResult, started: float) -> PlanResult:

@@ -10,7 +10,7 @@ import pytest
 from trustfg.agent.config import Obstacle, PlannerConfig, SafetyConfig, VehicleConfig, VerifyConfig, WorldConfig
 from trustfg.agent.fallback import brake_after, fallback
 from trustfg.agent.gp import Plan, standing
-from trustfg.agent.planner import PeerConstraint, PlanRequest, plan_trajectory
+from trustfg.agent.planner import PeerConstraint, PlanRequest, PlanResult, plan_trajectory
 from trustfg.agent.retime import retime
 from trustfg.agent.safe_plan import (
     AROUND_MARGIN_M,
@@ -19,7 +19,10 @@ from trustfg.agent.safe_plan import (
     RETRY,
     SLOWER_HORIZON,
     UNVERIFIED,
+    _pass_head_on,
     around_standing,
+    backs_away,
+    head_on,
     plan_safely,
 )
 from trustfg.agent.verify import Bounds, verify
@@ -280,3 +283,64 @@ def test_around_is_for_peers_that_stand_only(room):
                           SAFETY.epsilon_obstacle(R), peers=(PeerConstraint(creeping, EPS),), warm_start=through)
     conflicts = verify(through, request.peers, bounds(1), room, CONFIG).conflicts
     assert conflicts and around_standing(request, conflicts, room) is None
+
+
+def backing_away(start, duration=10.0) -> Plan:
+    """From ``start`` 1.5 m back along -x, waiting there, then on to (2, 0): a plan that
+    backs away first."""
+    back = straight(start, (start[0] - 1.5, start[1]), duration=duration / 2, n=11)
+    on = straight((start[0] - 1.5, start[1]), (2.0, 0.0), t0=duration / 2, duration=duration / 2, n=11)
+    return Plan(0.0, back.dt, np.vstack([back.positions, on.positions[1:]]),
+                np.vstack([back.velocities, on.velocities[1:]]))
+
+
+def test_a_plan_backs_away_when_it_leads_further_from_the_goal_within_a_second():
+    start = np.array([-0.5, 0.0])
+    request = PlanRequest(0.0, start, np.zeros(2), np.array([2.0, 0.0]), 10.0, SAFETY.epsilon_obstacle(R))
+    assert backs_away(backing_away(start), request)
+    assert not backs_away(straight(start, (2.0, 0.0)), request)
+    assert not backs_away(standing(start, 0.0), request)  # waiting is not backing away
+
+
+def test_a_peer_comes_head_on_when_it_closes_in_ahead_on_our_way():
+    start, goal = np.array([-1.0, 0.0]), np.array([2.0, 0.0])
+
+    def request(*peers):
+        return PlanRequest(0.0, start, np.zeros(2), goal, 10.0, SAFETY.epsilon_obstacle(R),
+                           peers=tuple(PeerConstraint(p, EPS) for p in peers))
+
+    coming = straight((1.5, 0.1), (-2.5, 0.1), duration=8.0)
+    assert head_on(request(coming)) is None  # from rest: not closing in yet at t = 0
+    moving = Plan(coming.t0, coming.dt, coming.positions, coming.velocities)
+    at = dataclasses.replace(request(moving), t_now=2.0)
+    assert head_on(at) == 0
+    going = straight((1.5, 0.1), (2.5, 0.1), duration=8.0)  # ahead, but driving away
+    aside = straight((1.5, 1.5), (-2.5, 1.5), duration=8.0)  # closing in, but off our way
+    behind = straight((-2.0, 0.0), (-2.9, 0.0), duration=8.0)
+    assert head_on(dataclasses.replace(request(going, aside, behind), t_now=2.0)) is None
+    assert head_on(dataclasses.replace(request(going, moving, aside), t_now=2.0)) == 1
+
+
+def test_a_car_backing_away_from_a_peer_head_on_passes_it_on_its_right(room):
+    """circle-16 seeds 49 and 69: a car backed away from its antipodal partner, both on one
+    diameter, back to its start -- the partner's goal -- and passed it there, too late.
+    Given a verified plan that backs away, ``pass`` finds one that passes on the right."""
+    peer = straight((2.0, 0.0), (-2.5, 0.0), duration=8.0)
+    t_now = 2.0
+    start = np.array([-0.5, 0.0])
+    request = PlanRequest(t_now, start, np.zeros(2), np.array([2.0, 0.0]), 12.0, SAFETY.epsilon_obstacle(R),
+                          peers=(PeerConstraint(peer, EPS),), lane=((-2.0, 0.0),))
+    backing = Plan(t_now, 0.5, backing_away(start).positions, backing_away(start).velocities)
+    assert backs_away(backing, request) and head_on(request) == 0
+    result = PlanResult(backing, 0, 0.0, 0.0, 0.0, True)
+    passed = _pass_head_on(request, result, bounds(1), PLANNER, room, CONFIG)
+    assert passed is not None
+    plan, verdict = passed
+    assert verdict.ok and verify(plan.plan, request.peers, bounds(1), room, CONFIG).ok
+    assert not backs_away(plan.plan, request)
+    times = np.linspace(t_now, plan.plan.t_end, 400)
+    ours, theirs = plan.plan.position_at(times), peer.position_at(times)
+    k = int(np.argmin(np.abs(ours[:, 0] - theirs[:, 0])))  # where the two are level
+    assert ours[k, 1] < theirs[k, 1] - 0.2  # on our right (heading +x: below)
+    straight_on = PlanResult(straight(start, (2.0, 0.0), t0=t_now), 0, 0.0, 0.0, 0.0, True)
+    assert _pass_head_on(request, straight_on, bounds(1), PLANNER, room, CONFIG) is None  # only a plan that backs away
