@@ -110,6 +110,9 @@ from .world import SignedDistanceField
 
 log = logging.getLogger(__name__)
 
+PASS_HOLD_S = 3.0
+"""How long after a pass of a peer head on (agent.safe_plan) the car plans without lane
+keeping, so that the next replans keep to the side it passes on."""
 ARRIVAL_SLACK_S = 1.0
 """Added to path length / cruise speed: time to speed up and slow down."""
 STALE_PREDICTION_S = 1.0
@@ -159,6 +162,8 @@ class CarAgent:
         """The last plan that passed verification: a fallback brakes along it."""
         self.last_outcome: Outcome | None = None
         self._optimised_at: float | None = None
+        self._passing_until = -math.inf
+        """Until when lane keeping is off: we are passing a peer head on (agent.safe_plan, ``pass``)."""
         """When the current plan was optimised and verified (None: it was not, or the car
         has given way since): a plan is kept at most ``verify.keep_s`` after that."""
         self.deadlock = DeadlockWatch(self.car.id, self.scenario.deadlock)
@@ -406,7 +411,7 @@ class CarAgent:
             t_now=t0, position=position, velocity=velocity, goal=goal, t_arrive=t_arrive,
             epsilon_obstacle=self.scenario.safety.epsilon_obstacle(self.car.radius_m),
             peers=tuple(c for _, c in constraints), warm_start=self.plan, route=self.car.route,
-            lane=(self.car.start, *self.car.route),
+            lane=(self.car.start, *self.car.route) if now >= self._passing_until else (),
         )
         detour = self._give_way(now, motion.position)
         if detour is not None:  # giving way in a deadlock (agent.deadlock): to the detour instead
@@ -434,6 +439,8 @@ class CarAgent:
             return None
         self._use(dataclasses.replace(outcome, blocked_by=tuple(constraints[i][0] for i in outcome.blocked_by)))
         self._optimised_at = now if outcome.outcome in (FIRST, RETRY) and detour is None else None
+        if outcome.tried and outcome.tried[-1] == "pass":  # hold the pass: no lane to pull us back in front of the peer
+            self._passing_until = now + PASS_HOLD_S
         return outcome.result
 
     def _keep(self, now: float, t0: float, on_plan: bool, request: PlanRequest, constraints: list,
