@@ -162,10 +162,10 @@ class CarAgent:
         """The last plan that passed verification: a fallback brakes along it."""
         self.last_outcome: Outcome | None = None
         self._optimised_at: float | None = None
-        self._passing_until = -math.inf
-        """Until when lane keeping is off: we are passing a peer head on (agent.safe_plan, ``pass``)."""
         """When the current plan was optimised and verified (None: it was not, or the car
         has given way since): a plan is kept at most ``verify.keep_s`` after that."""
+        self._passing_until = -math.inf
+        """Until when lane keeping is off: we are passing a peer head on (agent.safe_plan, ``pass``)."""
         self.deadlock = DeadlockWatch(self.car.id, self.scenario.deadlock)
         self.replan_ms: deque = deque(maxlen=100_000)  # bounded: a lab run may last hours
         self.counters: Counter = Counter()

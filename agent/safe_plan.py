@@ -199,9 +199,10 @@ def head_on(request: PlanRequest) -> int | None:
     best = None
     for i, peer in enumerate(request.peers):
         (q,), (w,) = peer.plan.state_at(np.array([request.t_now]))
-        ahead = float(along @ (q - request.position))
-        lateral = abs(float(along[0] * (q - request.position)[1] - along[1] * (q - request.position)[0]))
-        closing = float(w @ (request.position - q)) > 0.0
+        offset = q - request.position
+        ahead = float(along @ offset)
+        lateral = abs(float(along[0] * offset[1] - along[1] * offset[0]))
+        closing = float(w @ offset) < 0.0
         if 0.0 < ahead < length and lateral < peer.epsilon + HEAD_ON_LATERAL_M and closing:
             if best is None or ahead < best[0]:
                 best = (ahead, i)
