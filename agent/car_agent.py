@@ -441,6 +441,7 @@ class CarAgent:
         self._optimised_at = now if outcome.outcome in (FIRST, RETRY) and detour is None else None
         if outcome.tried and outcome.tried[-1] == "pass":  # hold the pass: no lane to pull us back in front of the peer
             self._passing_until = now + PASS_HOLD_S
+            self.counters["head_on_passes"] += 1  # a retry (plans_retry) that passes a peer met head on
         return outcome.result
 
     def _keep(self, now: float, t0: float, on_plan: bool, request: PlanRequest, constraints: list,
