@@ -15,14 +15,17 @@ def slug(heading: str) -> str:
     return text.replace(" ", "-")
 
 
+def prose(path: Path) -> str:
+    """The page without its code blocks (a ``# comment`` there is no heading, nor a link)."""
+    return re.sub(r"```.*?```", "", path.read_text(), flags=re.S)
+
+
 def anchors(path: Path) -> set[str]:
-    text = re.sub(r"```.*?```", "", path.read_text(), flags=re.S)
-    return {slug(m.group(1)) for m in re.finditer(r"^#+ (.+)$", text, re.M)}
+    return {slug(m.group(1)) for m in re.finditer(r"^#+ (.+)$", prose(path), re.M)}
 
 
 def links(path: Path):
-    text = re.sub(r"```.*?```", "", path.read_text(), flags=re.S)
-    for target in LINK.findall(text):
+    for target in LINK.findall(prose(path)):
         if not re.match(r"[a-z]+:", target):
             yield target
 
