@@ -222,7 +222,7 @@ def figure(report: dict, path: Path) -> Path:
                            color=colors.get(method), alpha=0.6, lw=0)
     top.set_ylabel("success (%), 95 % CI")
     top.set_ylim(0, 105)
-    top.legend(fontsize=8, ncol=len(methods), loc="lower left")
+    top.legend(fontsize=8, ncol=len(methods), loc="lower center", bbox_to_anchor=(0.5, 1.0), frameon=False)
     bottom.axhline(0.1, color="k", lw=1, ls="--", label="required clearance (breach below)")
     bottom.axhline(0.0, color="r", lw=1, label="contact")
     bottom.set_ylabel("least clearance per run (m)")

@@ -5,6 +5,7 @@
     trustfg experiment adversaries ...         (fleet.adversaries: every attack, three fleets)
     trustfg experiment transparency-sweep ...  (fleet.sweep: misinformation x g_max)
     trustfg experiment bank ...                (fleet.bank: the scenario bank and its baselines)
+    trustfg experiment bank-journals ...       (fleet.bank_journals: a table of journals of several commits)
 
 writes DIR/<name>/metrics.json and PNG figures and prints a table. metrics.json is
 
@@ -407,7 +408,8 @@ def write_study(folder: Path, report: dict, text: str) -> None:
     print(f"wrote {folder.resolve()} in {report['wall_time_s']:.0f} s")
 
 
-STUDIES = {"adversaries": "adversaries", "transparency-sweep": "sweep", "bank": "bank"}
+STUDIES = {"adversaries": "adversaries", "transparency-sweep": "sweep", "bank": "bank",
+           "bank-journals": "bank_journals"}
 """Experiments with their own options (``trustfg experiment NAME --help``), by module; not in "all"."""
 
 
