@@ -112,7 +112,8 @@ def markdown(report: dict) -> str:
     m = report["machine"]
     lines = [
         f"`{report['command']}` on {m['cpus']} cores ({m['cpu'] or m['platform']}): "
-        + ("the journal's runs, none run now, " if report["wall_time_s"] is None else f"{report['wall_time_s'] / 60:.1f} min, ")
+        + (("the journals' runs" if len(report.get("journals", ())) > 1 else "the journal's runs") + ", none run now, "
+           if report["wall_time_s"] is None else f"{report['wall_time_s'] / 60:.1f} min, ")
         + f"{report['cpu_time_s'] / 60:.1f} min of CPU time in the runs"
         + (", run on " + ", ".join(f"{code} ({n})" for code, n in report["code"].items()) if report.get("code") else "")
         + (" in environments " + ", ".join(f"{env} ({n})" for env, n in report["env"].items())
