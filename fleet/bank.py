@@ -37,7 +37,6 @@ of the pipeline off for an ablation (``--set planner.interp_checks=8``).
 from __future__ import annotations
 
 import copy
-import hashlib
 import json
 import os
 import platform
@@ -59,7 +58,7 @@ from .command import command_parser, configured
 from .experiments import BELIEVING, NO_TRUST, Progress, _sdf
 from .fleet_sim import simulate
 from .pool import parallel
-from .runs import RunRecord, motion_summary
+from .runs import RunRecord, fingerprint, motion_summary
 
 BANK = ("circle-4", "circle-8", "circle-16", "circle-obstacles-4", "circle-obstacles-8", "corridor-4",
         "bottleneck-4", "t-junction-6", "warehouse-8", "random-field-6-a", "random-field-6-b")
@@ -284,11 +283,6 @@ def recheck(scenes: dict[str, tuple[dict, str]], methods: list[str], seeds: dict
     print(f"{same} of {len(rechecked)} reruns the same as their journal entries to the last digit; "
           f"wrote {(out / 'recheck.json').resolve()}")
     return 0 if same == len(rechecked) else 1
-
-
-def fingerprint(scenario: Scenario) -> str:
-    """A digest of everything a run depends on besides its method and seed."""
-    return hashlib.sha256(repr(scenario).encode()).hexdigest()[:16]
 
 
 def code_version() -> str:

@@ -4,7 +4,7 @@
                                      [--scenes NAME ...] [--seed S] [--seeds K] [--out DIR] [--no-figures]
 
 ``trustfg experiment bank --report-only`` reports the runs of one journal whose
-configuration is the one this commit would run (fleet.bank.fingerprint). The README's
+configuration is the one this commit would run (fleet.runs.fingerprint). The README's
 table puts runs of several commits next to each other: the pipeline as shipped, from the
 journal it was run into, and the baselines, from the journal of the commit they ran on.
 This command reports such journal entries as they stand, naming each run's commit: from

@@ -44,7 +44,7 @@ from . import stats
 from .command import command_parser, configured
 from .fleet_sim import simulate
 from .pool import parallel
-from .runs import RunRecord, motion_summary, plan_outcomes, rounded
+from .runs import RunRecord, fingerprint, motion_summary, plan_outcomes, rounded
 from .trust_record import TRUST_GAP, TRUST_SETTLE_S, positions_at
 
 log = logging.getLogger(__name__)
@@ -235,9 +235,17 @@ def _job(task: tuple[str, Scenario, int]) -> tuple[dict, RunRecord]:
     return run_one(scenario, seed)
 
 
+Made = dict[tuple[str, int], tuple[dict, RunRecord]]
+"""Runs made so far, by (fingerprint, seed): a run depends on nothing else (fleet.runs.fingerprint)."""
+
+
 def run_experiment(name: str, seeds: list[int], out: Path, jobs: int, scenario_file: str | None = None,
-                   figures: bool = True, variants: tuple[str, ...] | None = None) -> dict:
-    """Run experiment ``name`` over ``seeds`` (``variants``: only these of its fleets; None: all)."""
+                   figures: bool = True, variants: tuple[str, ...] | None = None, made: Made | None = None) -> dict:
+    """Run experiment ``name`` over ``seeds`` (``variants``: only these of its fleets; None: all).
+
+    ``made``: the runs of the experiments before this one in the same call, which it adds
+    its own to. A fleet that two experiments share (proximity's and consistency's "on",
+    transparency's and lab's liar fleets) is then run once and taken by both."""
     experiment = EXPERIMENTS[name]
     unknown = sorted(set(variants or ()) - set(experiment.variants))
     if unknown:
@@ -247,14 +255,23 @@ def run_experiment(name: str, seeds: list[int], out: Path, jobs: int, scenario_f
     results: dict[str, list[dict]] = {}
     records: dict[str, list[RunRecord]] = {}
     started = time.perf_counter()
+    made = {} if made is None else made
     tasks = [(variant, make(base), seed) for variant, make in experiment.variants.items()
              if variants is None or variant in variants for seed in seeds]
-    progress = Progress(f"{name}", len(tasks))
-    for (variant, _, seed), (run, record) in parallel(_job, tasks, jobs):
-        results.setdefault(variant, []).append(run)
-        records.setdefault(variant, []).append(record)
+    keys = [(fingerprint(scenario), seed) for _, scenario, seed in tasks]
+    todo = [task for task, key in zip(tasks, keys) if key not in made]
+    if len(todo) < len(tasks):
+        print(f"[{name}] {len(tasks) - len(todo)} of {len(tasks)} runs taken from the experiments before it "
+              "(the same fleet and seed)", file=sys.stderr)
+    progress = Progress(f"{name}", len(todo))
+    for (variant, scenario, seed), (run, record) in parallel(_job, todo, jobs):
+        made[(fingerprint(scenario), seed)] = (run, record)
         progress.step(f"{variant} seed {seed}: min clearance {stats.least_pair_clearance(run):.3f} m")
     progress.done()
+    for (variant, _, _), key in zip(tasks, keys):
+        run, record = made[key]
+        results.setdefault(variant, []).append(dict(run))  # a report's own copy: another may share the run
+        records.setdefault(variant, []).append(record)
     report = {
         "experiment": name,
         "scenario": Path(str(source)).name,
@@ -438,8 +455,9 @@ def main(argv: list[str] | None = None) -> int:
     seeds = list(range(args.seed, args.seed + args.seeds))
     if args.scenario:
         configured("trustfg experiment", lambda: load_scenario(args.scenario))
+    made: Made = {}  # `all`: a fleet two experiments share runs once
     for name in names:
-        report = run_experiment(name, seeds, out, args.jobs, args.scenario, figures=not args.no_figures)
+        report = run_experiment(name, seeds, out, args.jobs, args.scenario, figures=not args.no_figures, made=made)
         print_table(report)
     print(f"\nwrote {out.resolve()}")
     return 0

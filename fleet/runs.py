@@ -8,6 +8,7 @@ breach, an arrival or a makespan means the same everywhere.
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -112,3 +113,10 @@ def plan_outcomes(counters: list[dict[str, int]]) -> dict:
         "deadlock_steps_aside": total["deadlock_steps_aside"],
         "outcomes": per_car,
     }
+
+
+def fingerprint(scenario: Scenario) -> str:
+    """A digest of everything a run depends on besides its seed (the scene's whole
+    configuration, a method's switches included): two runs of one fingerprint and seed
+    are the same run (in the same code and environment: fleet.environment)."""
+    return hashlib.sha256(repr(scenario).encode()).hexdigest()[:16]

@@ -22,6 +22,12 @@ def out(tmp_path_factory):
     return tmp_path_factory.mktemp("experiments")
 
 
+@pytest.fixture(scope="module")
+def made():
+    """The runs of this module's experiments, shared as in `trustfg experiment all`."""
+    return {}
+
+
 def test_a_run_is_deterministic_per_seed(intersection):
     first = simulate(intersection, 5)
     second = simulate(intersection, 5)
@@ -32,8 +38,8 @@ def test_a_run_is_deterministic_per_seed(intersection):
 
 
 @pytest.mark.slow
-def test_proximity_factors_prevent_breaches_that_happen_without_them(out):
-    report = run_experiment("proximity", SEEDS, out, JOBS, figures=False, variants=("on", "off"))
+def test_proximity_factors_prevent_breaches_that_happen_without_them(out, made):
+    report = run_experiment("proximity", SEEDS, out, JOBS, figures=False, variants=("on", "off"), made=made)
     on, off = report["variants"]["on"], report["variants"]["off"]
     assert all(not run["breaches"] for run in on)
     assert all(all(run["reached_goal"]) for run in on)
@@ -42,8 +48,8 @@ def test_proximity_factors_prevent_breaches_that_happen_without_them(out):
 
 
 @pytest.mark.slow
-def test_transparency_widens_the_berth_around_a_liar(out):
-    report = run_experiment("transparency", SEEDS, out, JOBS, figures=False)
+def test_transparency_widens_the_berth_around_a_liar(out, made):
+    report = run_experiment("transparency", SEEDS, out, JOBS, figures=False, made=made)
     summary = report["summary"]
     assert summary["liar_distance_ratio"] >= 1.5
     on = report["variants"]["on"]
@@ -55,8 +61,8 @@ def test_transparency_widens_the_berth_around_a_liar(out):
 
 
 @pytest.mark.slow
-def test_consistency_factor_lowers_the_inconsistency_index(out):
-    report = run_experiment("consistency", SEEDS, out, JOBS, figures=False)
+def test_consistency_factor_lowers_the_inconsistency_index(out, made):
+    report = run_experiment("consistency", SEEDS, out, JOBS, figures=False, made=made)
     summary = report["summary"]
     assert summary["on"]["inconsistency_mean"] < summary["off"]["inconsistency_mean"]
     assert summary["inconsistency_lower_with_factor_in_seeds"] >= len(SEEDS) / 2
@@ -146,3 +152,36 @@ def test_cars_that_stand_before_the_go_are_strangers_no_more_at_the_go(lab):
         cold, settled = at_the_go(0.0, seed), at_the_go(2.0, seed)
         assert cold.max() < 0.7, seed
         assert settled.min() >= 0.8, seed
+
+
+TWO_CARS = """
+name = "two-cars"
+[world]
+bounds_m = [-1.5, -1.5, 1.5, 1.5]
+obstacles = []
+[sim]
+timeout_s = 20.0
+[[cars]]
+id = 1
+start = [-1.0, 0.2]
+goal = [1.0, 0.2]
+[[cars]]
+id = 2
+start = [1.0, -0.2]
+goal = [-1.0, -0.2]
+"""
+
+
+def test_experiments_of_one_call_run_a_fleet_they_share_once(tmp_path, capsys):
+    """Proximity's "on" and consistency's "on" are one fleet: the second experiment takes
+    the first's run of it and runs only its own "off"."""
+    scene = tmp_path / "two-cars.toml"
+    scene.write_text(TWO_CARS)
+    made = {}
+    proximity = run_experiment("proximity", [7], tmp_path, 1, str(scene), figures=False, variants=("on",), made=made)
+    assert len(made) == 1
+    consistency = run_experiment("consistency", [7], tmp_path, 1, str(scene), figures=False, made=made)
+    assert len(made) == 2  # its "off" (no consistency factor) is a fleet of its own
+    assert consistency["variants"]["on"] == proximity["variants"]["on"]
+    assert consistency["variants"]["off"] != consistency["variants"]["on"]
+    assert "1 of 2 runs taken from the experiments before it" in capsys.readouterr().err
