@@ -29,6 +29,8 @@ from .runs import plan_outcomes
 BOOTSTRAP_RESAMPLES = 2000
 BOOTSTRAP_SEED = 0
 OUTCOMES = ("success", "breach", "contact", "deadlock", "timeout")
+GROUP_NAMES = {"bank": "bank", "fresh": "held-out"}
+"""How a figure names a scene group (fleet.bank: the shipped bank, and fields drawn fresh)."""
 
 
 def bootstrap_ci(values, statistic, seed: int = BOOTSTRAP_SEED, resamples: int = BOOTSTRAP_RESAMPLES,
@@ -229,9 +231,21 @@ def figure(report: dict, path: Path) -> Path:
     bottom.set_ylabel("least clearance per run (m)")
     bottom.legend(fontsize=8, loc="upper right")
     bottom.set_xticks(np.arange(len(scenes)), labels, rotation=30, ha="right")
-    seeds = {len(s["seeds"]) for s in report["scenes"].values()}
-    fig.suptitle(f"scenario bank, {'/'.join(map(str, sorted(seeds)))} seeds per scene", fontsize=10)
+    fig.suptitle(f"scenario bank: {seeds_per_scene(report)}", fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
     return path
+
+
+
+def seeds_per_scene(report: dict) -> str:
+    """The figure's title: "100 seeds per bank scene, 5 per held-out scene"."""
+    counts: dict[str, set[int]] = {}
+    for scene in report["scenes"].values():
+        counts.setdefault(scene["group"], set()).add(len(scene["seeds"]))
+    parts = []
+    for k, (group, n) in enumerate(sorted(counts.items())):
+        unit = "" if k else " seed" if n == {1} else " seeds"
+        parts.append(f"{'/'.join(map(str, sorted(n)))}{unit} per {GROUP_NAMES.get(group, group)} scene")
+    return ", ".join(parts)

@@ -12,7 +12,7 @@ from trustfg.agent.scenario_files import load_scenario
 from trustfg.agent.trust import TrustBook
 from trustfg.agent.world import build_sdf
 from trustfg.fleet.bank import METHODS, judge, parse_settings, scene_data, variant
-from trustfg.fleet.bank_report import bootstrap_ci
+from trustfg.fleet.bank_report import bootstrap_ci, seeds_per_scene
 from trustfg.fleet.runs import RunRecord
 
 
@@ -155,3 +155,12 @@ def test_bad_arguments_end_in_one_line(tmp_path):
     for args in (["--set", "planner.support_states=many"], ["--scenes", "no-such-scene"]):
         done = _bank(*args, "--seeds", "1", "--out", str(tmp_path))
         assert done.returncode == 2 and done.stderr.count("\n") == 1 and "Traceback" not in done.stderr, done.stderr
+
+
+def test_the_figure_title_says_how_many_seeds_each_group_of_scenes_ran():
+    def report(**groups):
+        return {"scenes": {f"{group}-{k}": {"group": group, "seeds": list(range(n))}
+                           for group, ns in groups.items() for k, n in enumerate(ns)}}
+    assert seeds_per_scene(report(bank=[100, 100], fresh=[5])) == "100 seeds per bank scene, 5 per held-out scene"
+    assert seeds_per_scene(report(bank=[1])) == "1 seed per bank scene"
+    assert seeds_per_scene(report(bank=[3, 2])) == "2/3 seeds per bank scene"
