@@ -384,11 +384,8 @@ class CarAgent:
         velocities = np.where(moving[:, None], motion.velocity, 0.0)
         return Plan(t0=motion.stamp, dt=dt, positions=positions, velocities=velocities)
 
-    def replan(self, now: float, keep_s: float | None = None) -> PlanResult | None:
-        """Plan from our observed state; None if we cannot (no pose yet, or at the goal).
-        ``keep_s``: how long a plan may be kept (module docstring, "Kept plans"); None:
-        ``verify.keep_s``. The car process keeps plans while its replans wait for a core
-        (fleet.car_process, STARVED_KEEP_S)."""
+    def replan(self, now: float) -> PlanResult | None:
+        """Plan from our observed state; None if we cannot (no pose yet, or at the goal)."""
         own = self.tracks.get(self.car.id)
         motion = own.motion() if own else None
         if motion is None:
@@ -423,8 +420,7 @@ class CarAgent:
         if self.liar is not None and now >= self.depart_at:  # a framer drives where it means harm
             request, constraints = self.liar.steer(request, constraints, now, self._seen(now))
             request = dataclasses.replace(request, peers=tuple(c for _, c in constraints))
-        kept = self._keep(now, t0, on_plan, request, constraints, detour,
-                          self.scenario.verify.keep_s if keep_s is None else keep_s)
+        kept = self._keep(now, t0, on_plan, request, constraints, detour)
         if kept is not None:
             self._use(kept)
             return kept.result
@@ -449,15 +445,14 @@ class CarAgent:
         return outcome.result
 
     def _keep(self, now: float, t0: float, on_plan: bool, request: PlanRequest, constraints: list,
-              detour: np.ndarray | None, keep_s: float) -> Outcome | None:
+              detour: np.ndarray | None) -> Outcome | None:
         """The current plan, verified again from ``t0``, if it may be kept (module
-        docstring, "Kept plans"; at most ``keep_s`` after it was optimised); else None:
-        optimise. ``on_plan``: the car tracks it (:meth:`_start_state` starts from it;
-        never before the departure)."""
+        docstring, "Kept plans"); else None: optimise. ``on_plan``: the car tracks it
+        (:meth:`_start_state` starts from it; never before the departure)."""
         config = self.scenario.verify
         plan = self.plan
-        if (keep_s <= 0 or not config.enabled or not on_plan or plan is not self.verified
-                or self._optimised_at is None or now - self._optimised_at > keep_s
+        if (config.keep_s <= 0 or not config.enabled or not on_plan or plan is not self.verified
+                or self._optimised_at is None or now - self._optimised_at > config.keep_s
                 or detour is not None or self.liar is not None
                 or np.linalg.norm(plan.positions[-1] - request.goal) > WARM_GOAL_M):
             return None

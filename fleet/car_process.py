@@ -74,29 +74,6 @@ from .laps import Laps
 
 log = logging.getLogger(__name__)
 
-STARVED_RATIO = 3.0
-"""A replan that took more than this many times its CPU time in wall time waited for a core."""
-STARVED_REPLANS = 5
-"""The replans (of at least STARVED_MIN_CPU_S each) whose median ratio decides."""
-STARVED_MIN_CPU_S = 0.001
-"""Replans cheaper than this (at the goal, no pose) say nothing of the machine."""
-STARVED_KEEP_S = 1.0
-"""While its replans wait for a core, a car keeps its plan up to this long after it was
-optimised, as long as it verifies against the peers' newest plans (agent.car_agent, "Kept
-plans"): on saturated cores every car replanned late against peers' plans made late,
-failed verification ten times as often as in-process, and its retries took the CPU the
-next car lacked (docs/architecture.md, "CPU"). A kept plan costs one verification. The
-in-process fleet runs on simulated time, never waits, and never keeps (verify.keep_s)."""
-
-
-def starved(replans: deque) -> bool:
-    """Whether the last STARVED_REPLANS replans, (wall s, CPU s) each, waited for a core:
-    the median of wall / CPU above STARVED_RATIO."""
-    if len(replans) < STARVED_REPLANS:
-        return False
-    ratios = sorted(wall / cpu for wall, cpu in replans)
-    return ratios[len(ratios) // 2] > STARVED_RATIO
-
 
 class CarProcess:
     """Everything one car runs; ``run()`` returns when ``stop`` is set."""
@@ -145,8 +122,6 @@ class CarProcess:
         """The main thread's CPU by section of its loop (fleet.cpu)."""
         self._driving_cpu: list[Snapshot] = []
         """Snapshots as the car starts to drive and as it stops (its first trial)."""
-        self._replan_times: deque = deque(maxlen=STARVED_REPLANS)
-        """(wall s, CPU s) of the last replans that did any work (:func:`starved`)."""
 
     def _new_agent(self) -> CarAgent:
         """A fresh mind: a car plans every trial anew (``CarAgent.carry_over`` keeps what it
@@ -425,17 +400,11 @@ class CarProcess:
                 self.agent.plan = standing(motion.position, now)
         else:
             stepped_aside = self.agent.deadlock.steps_aside
-            keep_s = STARVED_KEEP_S if starved(self._replan_times) else None
-            self.counters["replans_starved"] += keep_s is not None
-            wall, cpu = time.perf_counter(), time.thread_time()
             try:
-                self.agent.replan(now, keep_s=keep_s)
+                self.agent.replan(now)
             except Exception:  # keep the last plan; the car keeps tracking it
                 log.exception("car %d: replanning raised", self.car.id)
                 self.counters["replan_errors"] += 1
-            wall, cpu = time.perf_counter() - wall, time.thread_time() - cpu
-            if cpu >= STARVED_MIN_CPU_S:
-                self._replan_times.append((wall, cpu))
             aside = self.agent.deadlock.detour
             if parked and not self.agent.at_goal and aside is not None and aside.for_peer is not None:
                 if self.operation.step_aside(now, aside.for_peer):

@@ -21,11 +21,9 @@ def agent_of(intersection, intersection_sdf, keep_s: float) -> CarAgent:
     return CarAgent(alone.cars[0], alone, intersection_sdf)
 
 
-def drive(agent: CarAgent, t_from: float, t_to: float, offset=(0.0, 0.0), peer_at=None,
-          keep_s: float | None = None) -> list[str]:
-    """The car follows its plan exactly (shifted by ``offset``), replanning every period
-    (``keep_s`` as the car process passes it); ``peer_at``: where the peer stands, seen.
-    Returns the replans' outcomes."""
+def drive(agent: CarAgent, t_from: float, t_to: float, offset=(0.0, 0.0), peer_at=None) -> list[str]:
+    """The car follows its plan exactly (shifted by ``offset``), replanning every period;
+    ``peer_at``: where the peer stands, seen. Returns the replans' outcomes."""
     outcomes, period = [], agent.scenario.control.replan_period_s
     next_replan = t_from
     for t in np.arange(t_from, t_to, FRAME_S):
@@ -37,7 +35,7 @@ def drive(agent: CarAgent, t_from: float, t_to: float, offset=(0.0, 0.0), peer_a
         agent.gather_evidence(t)
         if t + 1e-9 >= next_replan:
             next_replan += period
-            agent.replan(t, keep_s=keep_s)
+            agent.replan(t)
             outcomes.append(agent.last_outcome.outcome)
     return outcomes
 
@@ -57,16 +55,6 @@ def test_a_clear_way_keeps_the_plan_until_it_is_keep_s_old(intersection, interse
     period = intersection.control.replan_period_s
     assert max(len(run) for run in optimised_runs) * period <= keep_s + 1e-9  # never kept past keep_s
     assert agent.counters["plans_kept"] == outcomes.count(KEPT)
-
-
-def test_a_replan_given_keep_s_keeps_where_the_config_would_not(intersection, intersection_sdf):
-    """The car process passes keep_s while its replans wait for a core (fleet.car_process):
-    the configured 0 then does not stop the keeping, and None leaves it to the config."""
-    agent = agent_of(intersection, intersection_sdf, 0.0)
-    assert KEPT not in drive(agent, 0.0, 1.0)
-    outcomes = drive(agent, 1.0, 3.0, keep_s=1.0)
-    assert outcomes.count(KEPT) >= len(outcomes) // 2
-    assert KEPT not in drive(agent, 3.0, 4.0, keep_s=None)
 
 
 def test_a_peer_that_steps_into_the_kept_plan_gets_a_new_plan(intersection, intersection_sdf):
@@ -89,20 +77,3 @@ def test_a_car_off_its_plan_gets_a_new_plan(intersection, intersection_sdf):
     agent = agent_of(intersection, intersection_sdf, 5.0)
     assert drive(agent, 0.0, 2.0)[-1] == KEPT
     assert KEPT not in drive(agent, 2.0, 2.2, offset=(0.12, 0.0))  # 12 cm off: tracked no more
-
-
-def test_replans_wait_for_a_core_when_most_of_the_last_five_took_three_times_their_cpu():
-    from collections import deque
-
-    from trustfg.fleet.car_process import STARVED_REPLANS, starved
-    replans = deque(maxlen=STARVED_REPLANS)
-    for _ in range(STARVED_REPLANS - 1):
-        replans.append((0.5, 0.05))  # 10x: waited
-    assert not starved(replans)  # too few to tell
-    replans.append((0.5, 0.05))
-    assert starved(replans)
-    for _ in range(STARVED_REPLANS // 2 + 1):
-        replans.append((0.011, 0.01))  # a free core again: the median follows
-    assert not starved(replans)
-    replans.extend([(0.5, 0.05)] * (STARVED_REPLANS // 2))  # a minority of late replans is not starving
-    assert not starved(replans)
