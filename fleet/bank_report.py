@@ -238,7 +238,6 @@ def figure(report: dict, path: Path) -> Path:
     return path
 
 
-
 def seeds_per_scene(report: dict) -> str:
     """The figure's title: "100 seeds per bank scene, 5 per held-out scene"."""
     counts: dict[str, set[int]] = {}

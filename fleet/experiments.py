@@ -259,13 +259,13 @@ def run_experiment(name: str, seeds: list[int], out: Path, jobs: int, scenario_f
     tasks = [(variant, make(base), seed) for variant, make in experiment.variants.items()
              if variants is None or variant in variants for seed in seeds]
     keys = [(fingerprint(scenario), seed) for _, scenario, seed in tasks]
-    todo = [task for task, key in zip(tasks, keys) if key not in made]
+    todo = {key: task for task, key in zip(tasks, keys) if key not in made}  # each fleet and seed once
     if len(todo) < len(tasks):
         print(f"[{name}] {len(tasks) - len(todo)} of {len(tasks)} runs taken from the experiments before it "
               "(the same fleet and seed)", file=sys.stderr)
     progress = Progress(f"{name}", len(todo))
-    for (variant, scenario, seed), (run, record) in parallel(_job, todo, jobs):
-        made[(fingerprint(scenario), seed)] = (run, record)
+    for key, ((variant, _, seed), (run, record)) in zip(todo, parallel(_job, list(todo.values()), jobs)):
+        made[key] = (run, record)  # parallel yields in the order of its tasks
         progress.step(f"{variant} seed {seed}: min clearance {stats.least_pair_clearance(run):.3f} m")
     progress.done()
     for (variant, _, _), key in zip(tasks, keys):
