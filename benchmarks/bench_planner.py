@@ -30,6 +30,11 @@ the same way: one native factor per chunk, on the chunk's keys, dense over them 
 chunk's rows, as GTSAM holds ours. "x floor" is our time per iteration over the floor's:
 the two are timed in turns and the median of the turns' ratios is printed
 (``lm_iterations_paired``).
+
+"x frozen": our iteration over that of our own graph with each of our factors frozen into
+a native one at the same point (``frozen_graph``: GTSAM gets our very Jacobians and
+residuals, without calling Python), timed in turns the same way: the part of "x floor"
+that is the price of a Python factor (the rest is the linear system's structure).
 """
 
 from __future__ import annotations
@@ -118,6 +123,22 @@ def native_floor_graph(request, config, sdf, t0, dt):
             terms = [x for key in group for x in (key, rng.normal(size=(m, 2)))]
             parts.add(gtsam.JacobianFactor(*terms, np.zeros(m), gtsam.noiseModel.Unit.Create(m)))
         graph.add(gtsam.LinearContainerFactor(gtsam.JacobianFactor(parts)))
+    return graph
+
+
+def frozen_graph(request, config, sdf, t0, dt, values):
+    """Our graph with every CustomFactor of ours replaced by its own linearisation at
+    ``values``, held by a native LinearContainerFactor: the same keys, rows and numbers
+    GTSAM gets from us at that point, without the calls into Python. An iteration of it
+    from ``values`` does what ours does there, but for those calls; so ours over it is
+    the price of Python factors, and it over the floor that of our linear system's
+    structure."""
+    graph = gtsam.NonlinearFactorGraph()
+    ours = build_graph(request, config, sdf, t0, dt)
+    for k in range(ours.size()):
+        factor = ours.at(k)
+        graph.add(gtsam.LinearContainerFactor(factor.linearize(values), values)
+                  if isinstance(factor, gtsam.CustomFactor) else factor)
     return graph
 
 
@@ -224,12 +245,15 @@ def run(n_states: int, n_peers: int, repeats: int) -> dict:
     floor_graph = lambda: native_floor_graph(request, config, sdf, t0, dt)  # noqa: E731
     assert first_step_accepted(ours_graph, values, lam) and first_step_accepted(floor_graph, values, lam)
     ours, floor, ratio = lm_iterations_paired(ours_graph, floor_graph, values, lam, repeats * 4)
+    frozen = lambda: frozen_graph(request, config, sdf, t0, dt, values)  # noqa: E731
+    assert first_step_accepted(frozen, values, lam)
+    _, _, over_frozen = lm_iterations_paired(ours_graph, frozen, values, lam, repeats * 4)
     return {"N": n_states, "peers": n_peers, "left_out": plain.peers_out_of_reach, "cold_ms": cold_ms,
             "cold_iterations": cold.result.iterations,
             "warm_ms": (statistics.median(warm_wall), statistics.median(warm_cpu)),
             "warm_iterations": statistics.median(iterations), "verify_ms": verify_ms,
             "plan_only_ms": (plan_only_ms[0], statistics.median(warm_plan_only)), "outcomes": dict(outcomes),
-            "ours_iter_ms": ours, "floor_iter_ms": floor, "x_floor": ratio}
+            "ours_iter_ms": ours, "floor_iter_ms": floor, "x_floor": ratio, "x_frozen": over_frozen}
 
 
 def main() -> None:
@@ -240,7 +264,8 @@ def main() -> None:
     print("cold and warm are whole replans: optimise + verify (+ retries or fallback when it fails);")
     print("verify: the check alone (wall / CPU); plan only: the optimiser alone, cold / warm (wall)")
     print(f"{'N':>3} {'peers':>5} {'(out)':>5} {'cold':>11} {'(iters)':>7} {'warm':>9} {'(iters)':>7} "
-          f"{'verify':>9} {'plan only':>9} {'LM iteration':>12} {'floor':>9} {'x floor':>11}   outcomes")
+          f"{'verify':>9} {'plan only':>9} {'LM iteration':>12} {'floor':>9} {'x floor':>11} {'x frozen':>11}"
+          "   outcomes")
     for n, peers in ((21, 3), (41, 3), (41, 15)):
         r = run(n, peers, args.repeats)
         pair = lambda x, f: f"{x[0]:{f}}/{x[1]:{f}}"  # noqa: E731
@@ -249,6 +274,7 @@ def main() -> None:
               f"{r['cold_iterations']:>7} {pair(r['warm_ms'], '.1f'):>9} {r['warm_iterations']:>7.0f} "
               f"{pair(r['verify_ms'], '.2f'):>9} {pair(r['plan_only_ms'], '.1f'):>9} "
               f"{pair(r['ours_iter_ms'], '.2f'):>12} {pair(r['floor_iter_ms'], '.2f'):>9} {pair(ratio, '.2f'):>11}"
+              f" {pair(r['x_frozen'], '.2f'):>11}"
               f"   {r['outcomes']}")
 
 
