@@ -126,7 +126,7 @@ def native_floor_graph(request, config, sdf, t0, dt):
     return graph
 
 
-def frozen_graph(request, config, sdf, t0, dt, values):
+def frozen_graph(ours, values):
     """Our graph with every CustomFactor of ours replaced by its own linearisation at
     ``values``, held by a native LinearContainerFactor: the same keys, rows and numbers
     GTSAM gets from us at that point, without the calls into Python. An iteration of it
@@ -134,7 +134,6 @@ def frozen_graph(request, config, sdf, t0, dt, values):
     the price of Python factors, and it over the floor that of our linear system's
     structure."""
     graph = gtsam.NonlinearFactorGraph()
-    ours = build_graph(request, config, sdf, t0, dt)
     for k in range(ours.size()):
         factor = ours.at(k)
         graph.add(gtsam.LinearContainerFactor(factor.linearize(values), values)
@@ -245,7 +244,7 @@ def run(n_states: int, n_peers: int, repeats: int) -> dict:
     floor_graph = lambda: native_floor_graph(request, config, sdf, t0, dt)  # noqa: E731
     assert first_step_accepted(ours_graph, values, lam) and first_step_accepted(floor_graph, values, lam)
     ours, floor, ratio = lm_iterations_paired(ours_graph, floor_graph, values, lam, repeats * 4)
-    frozen = lambda: frozen_graph(request, config, sdf, t0, dt, values)  # noqa: E731
+    frozen = lambda: frozen_graph(ours_graph(), values)  # noqa: E731
     assert first_step_accepted(frozen, values, lam)
     _, _, over_frozen = lm_iterations_paired(ours_graph, frozen, values, lam, repeats * 4)
     return {"N": n_states, "peers": n_peers, "left_out": plain.peers_out_of_reach, "cold_ms": cold_ms,
