@@ -77,8 +77,12 @@ def speed_cap(x: float, y: float, yaw: float, radius_m: float,
     t_r = config.reaction_s if reaction_s is None else reaction_s
     others = list(others)
     steps = math.ceil(abs(turn_rad) / TURN_STEP_RAD)  # the sweep, every TURN_STEP_RAD or finer
-    return min(_cap_at(x, y, yaw + turn_rad * k / max(steps, 1), radius_m, others, config, safety, sdf, t_r)
-               for k in range(steps + 1))
+    headings = [yaw + turn_rad * k / max(steps, 1) for k in range(steps + 1)]
+    walls = ([math.inf] * len(headings) if sdf is None else  # every heading's ray in one march
+             [stopping_speed(room, config, t_r) for room in wall_rooms(x, y, headings, sdf,
+                                                                       radius_m + config.wall_clearance_m)])
+    return min(_cap_at(x, y, heading, radius_m, others, config, safety, wall, t_r)
+               for heading, wall in zip(headings, walls))
 
 
 def capped_below(x: float, y: float, yaw: float, radius_m: float,
@@ -92,7 +96,7 @@ def capped_below(x: float, y: float, yaw: float, radius_m: float,
     if not speed > 0.0:
         return False
     t_r = config.reaction_s
-    if _cap_at(x, y, yaw, radius_m, list(others), config, safety, None, t_r) < speed:
+    if _cap_at(x, y, yaw, radius_m, list(others), config, safety, math.inf, t_r) < speed:
         return True
     return sdf is not None and _wall_cap(x, y, yaw, radius_m, config, sdf, t_r) < speed
 
@@ -104,8 +108,9 @@ def _wall_cap(x: float, y: float, yaw: float, radius_m: float, config: GuardConf
 
 
 def _cap_at(x: float, y: float, yaw: float, radius_m: float, others: list[tuple[float, float, float, float]],
-            config: GuardConfig, safety: SafetyConfig, sdf: SignedDistanceField | None, t_r: float) -> float:
-    cap = math.inf if sdf is None else _wall_cap(x, y, yaw, radius_m, config, sdf, t_r)
+            config: GuardConfig, safety: SafetyConfig, wall_cap: float, t_r: float) -> float:
+    """The cap at one heading: the others' terms and ``wall_cap``, the walls' (inf: none)."""
+    cap = wall_cap
     cos_cone = math.cos(math.radians(config.cone_deg))
     c, s = math.cos(yaw), math.sin(yaw)
     for ox, oy, oyaw, oradius in others:
@@ -137,7 +142,15 @@ def stopping_speed(room: float, config: GuardConfig, t_r: float) -> float:
 def wall_room(x: float, y: float, yaw: float, sdf: SignedDistanceField, keep_m: float) -> float:
     """How far the centre can go straight ahead before it comes closer to a wall than
     ``keep_m`` (or than it is now, if nearer); inf if free for RAY_LENGTH_M."""
-    ray = np.array([x, y]) + RAY_STEPS[:, None] * np.array([math.cos(yaw), math.sin(yaw)])
+    return wall_rooms(x, y, [yaw], sdf, keep_m)[0]
+
+
+def wall_rooms(x: float, y: float, headings: list[float], sdf: SignedDistanceField, keep_m: float) -> list[float]:
+    """:func:`wall_room` at each of ``headings``, the rays marched together (the same
+    numbers: the field is sampled point by point)."""
+    directions = np.array([[math.cos(h), math.sin(h)] for h in headings])
+    rays = np.array([x, y]) + RAY_STEPS[None, :, None] * directions[:, None, :]
     limit = min(keep_m, float(sdf.distance(np.array([x, y]))) - 1e-3)
-    blocked = np.flatnonzero(sdf.distance(ray) < limit)
-    return math.inf if blocked.size == 0 else float(RAY_STEPS[blocked[0]] - RAY_STEP_M)
+    blocked = sdf.distance(rays) < limit
+    first = blocked.argmax(axis=1)
+    return [float(RAY_STEPS[i] - RAY_STEP_M) if row[i] else math.inf for row, i in zip(blocked, first.tolist())]

@@ -51,15 +51,22 @@ class MotionWatch:
         if now - t0 < 0.5 * STUCK_AFTER_S:
             return False
         speed = math.hypot(x - x0, y - y0) / (now - t0)
-        half = t0 + 0.5 * (now - t0)
-        early = [v for t, *_, v in self.samples if t < half]
-        late = [v for t, *_, v in self.samples if t >= half]
-        commanded = min(sum(early) / len(early), sum(late) / len(late))  # the loop ticks steadily
-        changed = ((not self.stuck and commanded > STUCK_COMMAND_MPS and speed < STUCK_MOTION_MPS
-                    and now - t0 >= 0.9 * STUCK_AFTER_S) or (self.stuck and speed > 2 * STUCK_MOTION_MPS))
+        if self.stuck:
+            changed = speed > 2 * STUCK_MOTION_MPS
+        else:  # the averages only for a car that stands (they walk the window at every tick)
+            changed = (speed < STUCK_MOTION_MPS and now - t0 >= 0.9 * STUCK_AFTER_S
+                       and _least_half_average(self.samples, t0 + 0.5 * (now - t0)) > STUCK_COMMAND_MPS)
         if changed:
+            commanded = _least_half_average(self.samples, t0 + 0.5 * (now - t0))
             self.stuck = not self.stuck
             least = min(v for *_, v in self.samples)
             self.why = (f"told {commanded:.2f} m/s on average in each half (least {least:.2f}) over {now - t0:.2f} s "
                         f"({len(self.samples)} ticks), moved at {speed:.3f} m/s")
         return changed
+
+
+def _least_half_average(samples: deque, half: float) -> float:
+    """The lesser of the average commands before ``half`` and from it on (the loop ticks steadily)."""
+    early = [v for t, *_, v in samples if t < half]
+    late = [v for t, *_, v in samples if t >= half]
+    return min(sum(early) / len(early), sum(late) / len(late))
