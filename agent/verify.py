@@ -58,6 +58,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .config import VehicleConfig, VerifyConfig
+from .follower import follower_speeds
 from .gp import Plan
 from .planner import PeerConstraint
 from .world import SignedDistanceField
@@ -191,11 +192,7 @@ def follower_lag(times: np.ndarray, speed: np.ndarray, max_speed: float, max_acc
     if len(times) < 2:
         return 0.0, 0
     step = float(times[1] - times[0])
-    dv = max_accel * step
-    u = np.empty_like(speed)
-    u[0] = min(speed[0] if start_speed is None else start_speed, max_speed)
-    for k in range(1, len(speed)):
-        u[k] = min(max_speed, u[k - 1] + min(max(speed[k] - u[k - 1], -dv), dv))
+    u = follower_speeds(speed, speed[0] if start_speed is None else start_speed, max_speed, max_accel * step)
     lag = np.abs(np.cumsum(speed - u) * step)
     k = int(np.argmax(lag))
     return float(lag[k]), k

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from trustfg.agent.config import SafetyConfig, VehicleConfig, VerifyConfig, WorldConfig
+from trustfg.agent.follower import follower_speeds
 from trustfg.agent.gp import Plan, standing
 from trustfg.agent.planner import PeerConstraint
 from trustfg.agent.verify import Bounds, follower_lag, verify
@@ -132,6 +133,27 @@ def test_follower_lag_is_the_distance_lost_to_the_limits():
     step_up = np.where(times > 0.0, 0.6, 0.0)  # 0 -> 0.6 m/s at once; the car needs 0.4 s
     lag, _ = follower_lag(times, step_up, 0.8, 1.5)
     assert lag == pytest.approx(0.6 * 0.4 / 2, rel=0.05)  # the triangle it falls behind
+
+
+def _follower_in_python(wanted, start, max_speed, dv):
+    """The recurrence as plain Python (agent.follower's docstring), the reference."""
+    u = [min(start, max_speed)]
+    for s in wanted[1:]:
+        u.append(min(max_speed, u[-1] + min(max(s - u[-1], -dv), dv)))
+    return u
+
+
+def test_the_compiled_follower_is_the_python_loop_to_the_last_bit_nan_and_inf_included():
+    rng = np.random.default_rng(7)
+    for _ in range(2000):
+        wanted = rng.uniform(0.0, 1.2, int(rng.integers(1, 120)))
+        if rng.random() < 0.1:
+            wanted[rng.integers(len(wanted))] = rng.choice([np.nan, np.inf, -np.inf])
+        start = float(rng.choice([wanted[0], rng.uniform(0.0, 1.0), np.nan]))
+        max_speed, dv = float(rng.uniform(0.3, 1.0)), float(rng.uniform(0.001, 0.05))
+        expected = np.array(_follower_in_python(wanted.tolist(), start, max_speed, dv))
+        got = follower_speeds(wanted, start, max_speed, dv)
+        assert np.array_equal(got, expected, equal_nan=True)
 
 
 def test_no_plan_passes_with_non_finite_states(room):
