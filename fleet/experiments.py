@@ -261,8 +261,8 @@ def run_experiment(name: str, seeds: list[int], out: Path, jobs: int, scenario_f
     keys = [(fingerprint(scenario), seed) for _, scenario, seed in tasks]
     todo = {key: task for task, key in zip(tasks, keys) if key not in made}  # each fleet and seed once
     if len(todo) < len(tasks):
-        print(f"[{name}] {len(tasks) - len(todo)} of {len(tasks)} runs taken from the experiments before it "
-              "(the same fleet and seed)", file=sys.stderr)
+        print(f"[{name}] {len(tasks) - len(todo)} of {len(tasks)} runs not run again: the same fleet and seed "
+              "as a run before them, in this experiment or one before it", file=sys.stderr)
     progress = Progress(f"{name}", len(todo))
     for key, ((variant, _, seed), (run, record)) in zip(todo, parallel(_job, list(todo.values()), jobs)):
         made[key] = (run, record)  # parallel yields in the order of its tasks

@@ -187,4 +187,4 @@ def test_experiments_of_one_call_run_a_fleet_they_share_once(tmp_path, capsys):
     assert len(made) == 2  # its "off" (no consistency factor) is a fleet of its own
     assert consistency["variants"]["on"] == proximity["variants"]["on"]
     assert consistency["variants"]["off"] != consistency["variants"]["on"]
-    assert "1 of 2 runs taken from the experiments before it" in capsys.readouterr().err
+    assert "1 of 2 runs not run again: the same fleet and seed as a run before them" in capsys.readouterr().err
