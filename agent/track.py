@@ -118,7 +118,8 @@ class Track:
         if not len(samples):
             return np.zeros((len(times), 2)), np.zeros(len(times), dtype=bool)
         stamps = samples[:, 0]
-        right = np.clip(np.searchsorted(stamps, times), 0, len(stamps) - 1)
-        left = np.clip(right - 1, 0, len(stamps) - 1)
+        last = len(stamps) - 1  # np.minimum/np.maximum: np.clip's answer at a fraction of its cost
+        right = np.minimum(np.searchsorted(stamps, times), last)
+        left = np.maximum(right - 1, 0)
         nearest = np.where(np.abs(stamps[left] - times) <= np.abs(stamps[right] - times), left, right)
         return samples[nearest, 1:3], np.abs(stamps[nearest] - times) <= NEAREST_S
