@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from trustfg.agent.config import GuardConfig, SafetyConfig, VehicleConfig
-from trustfg.agent.guard import capped_below, reaction_time, speed_cap, wall_room
+from trustfg.agent.guard import RAY_STEP_M, RAY_STEPS, capped_below, reaction_time, speed_cap, wall_room, wall_rooms
 from trustfg.agent.vehicle import VehicleState, step
 
 GUARD = GuardConfig()
@@ -95,6 +95,25 @@ def test_wall_room_is_the_distance_to_the_stop_line(intersection_sdf):
     assert wall_room(0.0, -1.5, 0.0, intersection_sdf, KEEP) == pytest.approx(0.8 - KEEP, abs=0.03)
     assert wall_room(0.0, -1.5, math.pi, intersection_sdf, KEEP) == pytest.approx(0.8 - KEEP, abs=0.03)  # x = -0.8
     assert wall_room(0.0, -1.5, math.pi / 2, intersection_sdf, KEEP) == math.inf  # up the street: free
+
+
+def test_the_rays_of_every_heading_marched_together_stop_where_each_marched_alone_would(intersection_sdf):
+    """wall_rooms marches the headings a turning car sweeps in one call: each room is where
+    a point-by-point march along that heading first comes within the limit."""
+    rng = np.random.default_rng(3)
+    for _ in range(300):
+        x, y = rng.uniform(-2.4, 2.4, 2)
+        headings = list(rng.uniform(-math.pi, math.pi, int(rng.integers(1, 5))))
+        limit = min(KEEP, float(intersection_sdf.distance(np.array([x, y]))) - 1e-3)
+        rooms = wall_rooms(x, y, headings, intersection_sdf, KEEP)
+        for heading, room in zip(headings, rooms):
+            alone = math.inf
+            for ahead in RAY_STEPS:
+                point = np.array([x + ahead * math.cos(heading), y + ahead * math.sin(heading)])
+                if intersection_sdf.distance(point) < limit:
+                    alone = float(ahead - RAY_STEP_M)
+                    break
+            assert room == alone
 
 
 def test_a_car_near_a_wall_may_drive_along_or_away_from_it_but_not_into_it(intersection_sdf):
