@@ -121,8 +121,16 @@ def first_false_claim(told: list[tuple[float, Plan, bool]], truth_at, config: Tr
     and saw everything could first have caught it. A lie withdrawn with notice never comes
     due. ``told``: (stamp, plan, lied) in order of publication; ``truth_at(times)`` ->
     (k, 2) true positions. None: no lie came due."""
+    due = false_claim_times(told, truth_at, config, after)
+    return float(due[0]) if len(due) else None
+
+
+def false_claim_times(told: list[tuple[float, Plan, bool]], truth_at, config: TrustConfig,
+                      after: float = -np.inf) -> np.ndarray:
+    """Every audit time, not before ``after``, at which a lie came due
+    (:func:`first_false_claim`'s rules), sorted, each once."""
     c = config
-    first = None
+    due = [np.empty(0)]
     for i, (stamp, plan, lied) in enumerate(told):
         if not lied:
             continue
@@ -130,10 +138,25 @@ def first_false_claim(told: list[tuple[float, Plan, bool]], truth_at, config: Tr
         times = check_times(plan, stamp, c)
         times = times[((times == stamp) | (times <= superseded)) & (times >= after)]
         misses = np.linalg.norm(plan.position_at(times) - truth_at(times), axis=1)
-        false = times[misses > tolerance(times - stamp, c)]
-        if len(false) and (first is None or false[0] < first):
-            first = float(false[0])
-    return first
+        due.append(times[misses > tolerance(times - stamp, c)])
+    return np.unique(np.concatenate(due))
+
+
+def sustained_lie(due: np.ndarray, config: TrustConfig, lasting_s: float) -> float | None:
+    """The start of the first run of lies coming due (``due``: sorted times,
+    :func:`false_claim_times`) that lasts ``lasting_s`` or more with no pause longer than
+    two audit periods; None if no run lasts that long. A lie told for a moment and then
+    not again -- a liar that stands has nothing to bend -- is forgotten (trust forgets,
+    ``TrustConfig.forgetting``) before it can tell the liar apart: detection is timed
+    from a lie that goes on."""
+    pause = 2.0 * config.audit_period_s + 1e-9
+    start = 0
+    for k in range(1, len(due) + 1):
+        if k == len(due) or due[k] - due[k - 1] > pause:
+            if due[k - 1] - due[start] >= lasting_s - 1e-9:
+                return float(due[start])
+            start = k
+    return None
 
 
 def false_now(miss_m: float, tolerance_m: float) -> float:

@@ -4,8 +4,9 @@ detection from there)."""
 import dataclasses
 
 import numpy as np
+import pytest
 
-from trustfg.agent.audit import first_false_claim
+from trustfg.agent.audit import false_claim_times, first_false_claim, sustained_lie
 from trustfg.agent.config import TrustConfig
 from trustfg.agent.gp import Plan
 
@@ -56,3 +57,23 @@ def test_a_truthful_plan_is_never_a_lie_even_when_it_misses():
 def test_nothing_before_the_first_lie_counts():
     told = [(0.0, leaving(), True)]
     assert first_false_claim(told, at_rest, CONFIG, after=2.5) == 2.6
+
+
+def test_a_lie_is_sustained_from_the_start_of_the_first_run_that_lasts():
+    period = CONFIG.audit_period_s
+    brief = np.arange(-0.4, 0.25, 0.1)  # 0.6 s of lies, then the liar stands
+    lasting = np.arange(0.9, 3.0, 0.1)
+    assert sustained_lie(np.r_[brief, lasting], CONFIG, 1.0) == pytest.approx(0.9)
+    assert sustained_lie(np.r_[brief, lasting], CONFIG, 0.5) == pytest.approx(-0.4)
+    assert sustained_lie(brief, CONFIG, 1.0) is None
+    assert sustained_lie(np.empty(0), CONFIG, 1.0) is None
+    paused = np.r_[np.arange(0.0, 0.6, period), np.arange(0.6 + 2.5 * period, 1.6, period)]  # a pause too long
+    assert sustained_lie(paused, CONFIG, 1.0) is None
+    steady = np.arange(0.0, 1.3, 2 * period)  # a lie every two audit periods still goes on
+    assert sustained_lie(steady, CONFIG, 1.0) == 0.0
+
+
+def test_the_first_false_claim_is_the_first_of_all_the_times_lies_came_due():
+    told = [(0.0, leaving(), True), (0.5, standing(at=(0.4, 0.0), t0=0.5), True)]
+    due = false_claim_times(told, at_rest, CONFIG)
+    assert list(due) == sorted(set(due)) and first_false_claim(told, at_rest, CONFIG) == due[0] == 0.5
