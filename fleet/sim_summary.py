@@ -16,7 +16,7 @@ from ..agent.config import Scenario
 from ..agent.world import build_sdf
 from .bus import FleetBus
 from .runs import RunRecord, arrivals, motion_summary, plan_outcomes
-from .trust_record import clock_offsets, first_lie_due, trust_over_time
+from .trust_record import clock_offsets, lies_due, trust_over_time
 
 
 class Recorder:
@@ -102,7 +102,7 @@ def summarise(scenario: Scenario, out: Path, recorder: Recorder, t_go: float | N
     if t_go is not None:
         summary |= trust_over_time(scenario, list(recorder.trust_log), t_go)
         if scenario.liars:
-            summary["first_lie_due_s"] = first_lie_due(scenario, out / "messages.jsonl", times, states, t_go)
+            summary |= lies_due(scenario, out / "messages.jsonl", times, states, t_go)
     return summary
 
 
@@ -170,7 +170,8 @@ def print_summary(summary: dict) -> None:
     if "liar_id" in summary:
         print(f"liars {summary['liar_ids']}: min distance from honest cars {summary['liar_min_distance']}, "
               f"honest-liar breaches {summary['liar_breaches'] or 'none'}, first lie due at "
-              f"{summary.get('first_lie_due_s', '-')} s, detected at {summary.get('trust_detected_at_s', '-')} s")
+              f"{summary.get('first_lie_due_s', '-')} s, sustained from {summary.get('sustained_lie_due_s', '-')} s, "
+              f"detected at {summary.get('trust_detected_at_s', '-')} s")
     print("clock offsets as peers estimate them (ms, median): " + "  ".join(
         f"{car}: {ms:+.0f}" for car, ms in summary.get("clock_offsets", {}).items()))
     print(f"crashed: {summary['crashed'] or 'none'}")

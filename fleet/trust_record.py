@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from ..agent import metrics
-from ..agent.audit import first_false_claim
+from ..agent.audit import false_claim_times, sustained_lie
 from ..agent.config import Scenario
 from ..agent.gp import Plan
 
@@ -21,6 +21,11 @@ TRUST_SETTLE_S = 3.0
 """Honest trust is judged from this long after the start: before, evidence is still coming in."""
 TRUST_GAP = 0.2
 """A liar is detected when every honest car trusts it this much less than every honest peer."""
+LIE_SUSTAINED_S = 1.0
+"""A lie is sustained once it has kept coming due for this long (agent.audit.sustained_lie):
+told for 0.6 s before the go and then not until the liar set off 0.7 s later, a lie put
+the liar 0.14 below honest peers in honest cars' trust, and the gap closed to 0.11 before
+the next lie (``trustfg sim`` of lab with a liar, seed 12, four CPU hogs beside it)."""
 
 
 def trust_over_time(scenario: Scenario, log: list[tuple[float, int, int, float]], t_go: float) -> dict:
@@ -57,13 +62,15 @@ def clock_offsets(stats: dict[int, dict | None], ids: list[int]) -> dict[str, fl
     return {str(i): round(float(np.median(v)) * 1e3, 1) for i, v in seen.items() if v}
 
 
-def first_lie_due(scenario: Scenario, messages_path: Path, times: np.ndarray, states: np.ndarray,
-                  t_go: float) -> float | None:
-    """When a liar's claim first put it beyond the audit's tolerance from where it truly
-    was (s after the go): the earliest moment the lie could have been caught
-    (agent.audit.first_false_claim, on every plan the liars published as the observer
-    heard them, against mocap-sim's ground truth). A liar standing still has nothing its
-    attack can bend, so its departure is no start for detection. None: no lie came due."""
+def lies_due(scenario: Scenario, messages_path: Path, times: np.ndarray, states: np.ndarray,
+             t_go: float) -> dict:
+    """When the liars' lies came due (s after the go), from every plan the liars published
+    as the observer heard them, against mocap-sim's ground truth (agent.audit's rules: the
+    earliest moments the lies could have been caught). ``first_lie_due_s``: the first lie
+    of any liar. ``sustained_lie_due_s``: when every liar had begun a lie lasting
+    LIE_SUSTAINED_S (agent.audit.sustained_lie) -- a liar standing still has nothing its
+    attack can bend, so a lie told before it stands (before the go, or before a deadlock)
+    stops there, and trust forgets it. None: no such lie came due."""
     ids = [c.id for c in scenario.cars]
     told: dict[int, list[tuple[float, Plan, bool]]] = {car: [] for car in scenario.liars}
     with open(messages_path) as f:
@@ -76,13 +83,16 @@ def first_lie_due(scenario: Scenario, messages_path: Path, times: np.ndarray, st
                 plan = Plan(message["t0"], message["dt"], np.array(message["positions"]),
                             np.array(message["velocities"]))
                 told[message["id"]].append((message["stamp"], plan, True))  # judged by the truth alone
-    due = []
+    first, sustained = [], []
     for car, plans in told.items():
-        first = first_false_claim(sorted(plans, key=lambda told: told[0]),
-                                  positions_at(times, states[:, ids.index(car), :2]), scenario.trust)
-        if first is not None:
-            due.append(first - t_go)
-    return round(min(due), 2) if due else None
+        due = false_claim_times(sorted(plans, key=lambda told: told[0]),
+                                positions_at(times, states[:, ids.index(car), :2]), scenario.trust)
+        if len(due):
+            first.append(float(due[0]) - t_go)
+        sustained.append(sustained_lie(due, scenario.trust, LIE_SUSTAINED_S))
+    return {"first_lie_due_s": round(min(first), 2) if first else None,
+            "sustained_lie_due_s": None if not sustained or None in sustained
+            else round(max(sustained) - t_go, 2)}
 
 
 def positions_at(times: np.ndarray, xy: np.ndarray):

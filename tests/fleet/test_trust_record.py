@@ -6,7 +6,7 @@ import json
 import numpy as np
 
 from trustfg.agent.config import AttackConfig
-from trustfg.fleet.trust_record import first_lie_due
+from trustfg.fleet.trust_record import lies_due
 
 
 def _scenario(lab, liar):
@@ -36,6 +36,7 @@ def test_a_liar_that_stands_telling_the_truth_has_told_no_lie_until_it_does(lab,
     records.append(_plan_record(ids[1], 1, t_go + 2.0, [[0.9, 0.0]] * 5))  # honest car: not the liar's
     path = tmp_path / "messages.jsonl"
     path.write_text("".join(json.dumps(r) + "\n" for r in records))
-    assert first_lie_due(scenario, path, times, states, t_go) == 10.0
+    # held to its word to its end (no plan after it): a lie that goes on for 2 s
+    assert lies_due(scenario, path, times, states, t_go) == {"first_lie_due_s": 10.0, "sustained_lie_due_s": 10.0}
     path.write_text("".join(json.dumps(r) + "\n" for r in records[:100]))
-    assert first_lie_due(scenario, path, times, states, t_go) is None
+    assert lies_due(scenario, path, times, states, t_go) == {"first_lie_due_s": None, "sustained_lie_due_s": None}
