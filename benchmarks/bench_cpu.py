@@ -18,6 +18,9 @@ of one core averaged over the cars: the main thread by section of its loop (repl
 evidence, messages in, frames, publishing, feeding the command loop, the loop's own
 passes and waits), the car process's other threads (Zenoh's; a NatNet socket thread, had
 the client one), and the command loop process (its ticks, and any other thread of it).
+Last, the replans' CPU over the run by how each ended (first try, retry, fallback, kept:
+``replan_cpu`` in the car's ``--stats``), summed over the cars: count, CPU per replan and
+share of all replanning.
 Both NatNet clients are pulled by their readers (bridge.natnet_client, "Pull"): their
 work is in the main thread's "frames" and in the loop's ticks.
 """
@@ -58,6 +61,23 @@ def main() -> None:
         print(f"{scenario.name:>16} {len(cars) - 1:>5} {statistics.mean(cars):>6.3f} {min(cars):>6.3f} "
               f"{max(cars):>6.3f} {total:>14.2f} {p95:>14.1f}")
         print_breakdown(summary)
+        print_replan_outcomes(summary)
+
+
+def print_replan_outcomes(summary: dict) -> None:
+    """The replans' CPU over the whole run, summed over the cars, by how each ended."""
+    totals: dict[str, list[float]] = {}
+    for per_car in summary.get("replan_cpu", {}).values():
+        for outcome, entry in (per_car or {}).items():
+            total = totals.setdefault(outcome, [0, 0.0])
+            total[0] += entry["count"]
+            total[1] += entry["cpu_s"]
+    cpu = sum(t[1] for t in totals.values())
+    if not cpu > 0:
+        return
+    print("    replans by outcome (all cars, whole run): " + ", ".join(
+        f"{outcome} {int(count)} x {seconds / count * 1e3:.1f} ms ({seconds / cpu:.0%})"
+        for outcome, (count, seconds) in sorted(totals.items(), key=lambda kv: -kv[1][1])))
 
 
 def print_breakdown(summary: dict) -> None:

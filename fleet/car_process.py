@@ -122,6 +122,8 @@ class CarProcess:
         """The main thread's CPU by section of its loop (fleet.cpu)."""
         self._driving_cpu: list[Snapshot] = []
         """Snapshots as the car starts to drive and as it stops (its first trial)."""
+        self.replan_cpu: dict[str, list[float]] = {}
+        """Per replan outcome (first, retry, fallback, kept, ...): [replans, CPU seconds]."""
 
     def _new_agent(self) -> CarAgent:
         """A fresh mind: a car plans every trial anew (``CarAgent.carry_over`` keeps what it
@@ -400,11 +402,17 @@ class CarProcess:
                 self.agent.plan = standing(motion.position, now)
         else:
             stepped_aside = self.agent.deadlock.steps_aside
+            before, started = self.agent.last_outcome, time.thread_time()
             try:
                 self.agent.replan(now)
             except Exception:  # keep the last plan; the car keeps tracking it
                 log.exception("car %d: replanning raised", self.car.id)
                 self.counters["replan_errors"] += 1
+            outcome = self.agent.last_outcome
+            if outcome is not None and outcome is not before:  # a replan ended: its CPU, by how
+                spent = self.replan_cpu.setdefault(outcome.outcome, [0, 0.0])
+                spent[0] += 1
+                spent[1] += time.thread_time() - started
             aside = self.agent.deadlock.detour
             if parked and not self.agent.at_goal and aside is not None and aside.for_peer is not None:
                 if self.operation.step_aside(now, aside.for_peer):

@@ -159,5 +159,7 @@ def write_stats(path: Path, process: Any, bus: FleetBus | None) -> None:
         "link_sent": process.command.link.get("link_sent"),
         "link_answers": process.command.link.get("link_answers"),
         "cpu_driving": process.driving_cpu(),
+        "replan_cpu": {outcome: {"count": int(count), "cpu_s": round(cpu, 4)}
+                       for outcome, (count, cpu) in sorted(process.replan_cpu.items())},
     }
     path.write_text(json.dumps(stats, indent=1))

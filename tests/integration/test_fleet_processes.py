@@ -52,6 +52,12 @@ def test_four_car_processes_reach_their_goals_without_breach(honest):
         assert driving["sections"]["replan"] > 0 and driving["sections"]["messages"] > 0, driving
         assert driving["threads"]["main"] >= sum(driving["sections"].values()) - 0.05, driving
         assert driving["command_loop"]["main"] > 0 and driving["sections"]["frames"] > 0, driving
+        # The replans' CPU by how each ended: one entry per outcome the car counted.
+        by_outcome = summary["replan_cpu"][car]
+        counted = {k: v for k, v in summary["plan_outcomes"][car].items()
+                   if k in ("first", "retry", "fallback", "unverified", "kept") and v}
+        assert {k: v["count"] for k, v in by_outcome.items()} == counted, (by_outcome, counted)
+        assert all(v["cpu_s"] > 0 for v in by_outcome.values()), by_outcome
         # Both NatNet clients are pulled by their readers: no socket thread works (the car
         # process's would show as "natnet", the command loop's as its "other").
         assert driving["threads"]["natnet"] == 0 and driving["command_loop"]["other"] == 0, driving
