@@ -78,9 +78,7 @@ def speed_cap(x: float, y: float, yaw: float, radius_m: float,
     others = list(others)
     steps = math.ceil(abs(turn_rad) / TURN_STEP_RAD)  # the sweep, every TURN_STEP_RAD or finer
     headings = [yaw + turn_rad * k / max(steps, 1) for k in range(steps + 1)]
-    walls = ([math.inf] * len(headings) if sdf is None else  # every heading's ray in one march
-             [stopping_speed(room, config, t_r) for room in wall_rooms(x, y, headings, sdf,
-                                                                       radius_m + config.wall_clearance_m)])
+    walls = [math.inf] * len(headings) if sdf is None else _wall_caps(x, y, headings, radius_m, config, sdf, t_r)
     return min(_cap_at(x, y, heading, radius_m, others, config, safety, wall, t_r)
                for heading, wall in zip(headings, walls))
 
@@ -98,13 +96,15 @@ def capped_below(x: float, y: float, yaw: float, radius_m: float,
     t_r = config.reaction_s
     if _cap_at(x, y, yaw, radius_m, list(others), config, safety, math.inf, t_r) < speed:
         return True
-    return sdf is not None and _wall_cap(x, y, yaw, radius_m, config, sdf, t_r) < speed
+    return sdf is not None and _wall_caps(x, y, [yaw], radius_m, config, sdf, t_r)[0] < speed
 
 
-def _wall_cap(x: float, y: float, yaw: float, radius_m: float, config: GuardConfig, sdf: SignedDistanceField,
-              t_r: float) -> float:
-    """The walls' term of the cap: stop before the ray ahead comes within the clearance."""
-    return stopping_speed(wall_room(x, y, yaw, sdf, radius_m + config.wall_clearance_m), config, t_r)
+def _wall_caps(x: float, y: float, headings: list[float], radius_m: float, config: GuardConfig,
+               sdf: SignedDistanceField, t_r: float) -> list[float]:
+    """The walls' term of the cap at each heading: stop before the ray ahead comes within
+    the clearance (every heading's ray in one march)."""
+    return [stopping_speed(room, config, t_r)
+            for room in wall_rooms(x, y, headings, sdf, radius_m + config.wall_clearance_m)]
 
 
 def _cap_at(x: float, y: float, yaw: float, radius_m: float, others: list[tuple[float, float, float, float]],
