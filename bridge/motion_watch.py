@@ -51,13 +51,14 @@ class MotionWatch:
         if now - t0 < 0.5 * STUCK_AFTER_S:
             return False
         speed = math.hypot(x - x0, y - y0) / (now - t0)
+        half = t0 + 0.5 * (now - t0)
         if self.stuck:
             changed = speed > 2 * STUCK_MOTION_MPS
         else:  # the averages only for a car that stands (they walk the window at every tick)
             changed = (speed < STUCK_MOTION_MPS and now - t0 >= 0.9 * STUCK_AFTER_S
-                       and _least_half_average(self.samples, t0 + 0.5 * (now - t0)) > STUCK_COMMAND_MPS)
+                       and _least_half_average(self.samples, half) > STUCK_COMMAND_MPS)
         if changed:
-            commanded = _least_half_average(self.samples, t0 + 0.5 * (now - t0))
+            commanded = _least_half_average(self.samples, half)
             self.stuck = not self.stuck
             least = min(v for *_, v in self.samples)
             self.why = (f"told {commanded:.2f} m/s on average in each half (least {least:.2f}) over {now - t0:.2f} s "
