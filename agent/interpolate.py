@@ -53,6 +53,11 @@ def _states(t0, dt, positions, velocities, times, pos, vel):
             vel[q, 0], vel[q, 1] = 0.0, 0.0
 
 
+hermite_states = _states
+"""The compiled loop itself, (t0, dt, positions, velocities, times, pos, vel) -> pos, vel
+filled, for other compiled loops to call (agent.gaps)."""
+
+
 @numba.njit(cache=True, nogil=True)
 def _accelerations(t0, dt, dt2, positions, velocities, times, acc):
     n = positions.shape[0]

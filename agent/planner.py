@@ -34,7 +34,7 @@ import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import V, X
 
-from . import factors, follower, interpolate, interval_kernel
+from . import factors, follower, gaps, interpolate, interval_kernel
 from .config import PlannerConfig
 from .gp import Plan, interpolation_weights
 from .interval_factors import add_batched_checks, add_gtsam_interp_checks
@@ -332,8 +332,9 @@ def _check_request(request: PlanRequest) -> None:
 
 def warm_compiled() -> None:
     """Compile, or load from numba's cache, the planner's compiled loops (agent.interval_kernel,
-    agent.interpolate, and verification's agent.follower) -- once before many processes
+    agent.interpolate, and verification's agent.follower and agent.gaps) -- once before many processes
     start, or before a car's first replan."""
     interval_kernel.warm()
     interpolate.warm()
     follower.warm()
+    gaps.warm()
