@@ -30,7 +30,7 @@ from trustfg.agent.scenario_files import load_scenario
 from trustfg.agent.world import build_sdf
 from trustfg.bridge import natnet
 from trustfg.bridge.carlink import SOURCE_CAR_PROCESS, CommandReceiver, CommandSender, link_key
-from trustfg.fleet.command_loop import REPORT_FIELDS, Permit, _connect, _Loop
+from trustfg.fleet.command_loop import REPORT_FIELDS, CommandLoop, Permit, connect_motive
 from trustfg.fleet.launch import default_scenario, loopback_fleet
 from trustfg.fleet.link_keys import with_link_keys
 from trustfg.fleet.ticker import ticks
@@ -60,9 +60,9 @@ def run_once(cars: int, seconds: float, keys: Path) -> tuple[list[float], float]
     rate = scenario.control.command_rate_hz
     spent: list[float] = []
     with NatNetServer(options, bodies), CommandReceiver(car.id, (host, int(port)), key=link_key(car)):
-        loop = _Loop(scenario, car, [0.0] * len(REPORT_FIELDS), clock=time.time, sdf=build_sdf(scenario.world))
+        loop = CommandLoop(scenario, car, [0.0] * len(REPORT_FIELDS), clock=time.time, sdf=build_sdf(scenario.world))
         stop = threading.Event()
-        _connect(loop, stop)
+        connect_motive(loop, stop)
         loop.plan = plan
         loop.permit = Permit(may_drive=True, trial=1, valid_until=math.inf)
         with CommandSender.for_car(car, source=SOURCE_CAR_PROCESS, stamp_clock=time.time) as sender:

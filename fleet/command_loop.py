@@ -167,8 +167,9 @@ def name_process(name: str) -> None:
 
 
 @dataclass
-class _Loop:
-    """The command process's state; ``tick`` is one control step."""
+class CommandLoop:
+    """The command process's state; ``tick`` is one control step (:func:`serve` runs them
+    at the command rate; benchmarks/bench_command_tick.py times one car's)."""
 
     scenario: Scenario
     car: CarConfig
@@ -270,7 +271,7 @@ class _Loop:
         self._publish("answers", self.counts["answers"] + 1)
 
 
-def _connect(loop: _Loop, stop: threading.Event) -> None:
+def connect_motive(loop: CommandLoop, stop: threading.Event) -> None:
     """Reach Motive (retrying every ``control.retry_s``) and hand the client to the loop."""
     # A tick reads the newest pose: frames are taken from the socket and decoded when it
     # asks, not as they come (50 Hz of Motive's 120-360; the same pose, with its own
@@ -306,9 +307,9 @@ def serve(settings: LoopSettings, conn: Any, report: Any) -> None:
     name_process(f"trustfg-cmd-{car.id}")  # ps and top show it; the spawn command line does not say
     scheduling = realtime(scenario.control.realtime_priority)  # before any thread: they inherit it
     offset = car.clock_offset_s
-    loop = _Loop(scenario, car, report, clock=lambda: time.time() + offset, sdf=settings.sdf)
+    loop = CommandLoop(scenario, car, report, clock=lambda: time.time() + offset, sdf=settings.sdf)
     loop._publish("realtime", float(scheduling != "normal"))
-    connector = threading.Thread(target=_connect, args=(loop, stop), name=f"natnet-connect-{car.id}", daemon=True)
+    connector = threading.Thread(target=connect_motive, args=(loop, stop), name=f"natnet-connect-{car.id}", daemon=True)
     connector.start()
     rate = scenario.control.command_rate_hz
     gaps: deque[float] = deque(maxlen=int(GAP_WINDOW_S * rate))
