@@ -34,13 +34,17 @@ def process_covariance(s: float, qc: float = 1.0) -> np.ndarray:
     return qc * np.array([[s**3 / 3.0, s**2 / 2.0], [s**2 / 2.0, s]])
 
 
-def interpolation_matrices(dt: float, tau: float) -> tuple[np.ndarray, np.ndarray]:
-    """(Lambda, Psi) for a time tau in [0, dt] after the left support state."""
+def interpolation_matrices(dt: float, tau: float, q_dt_inv: np.ndarray | None = None
+                           ) -> tuple[np.ndarray, np.ndarray]:
+    """(Lambda, Psi) for a time tau in [0, dt] after the left support state
+    (``q_dt_inv``: Q(dt)^-1, when the caller has it already)."""
     if tau <= 0.0:
         return np.eye(2), np.zeros((2, 2))
     if tau >= dt:
         return np.zeros((2, 2)), np.eye(2)
-    psi = process_covariance(tau) @ transition(dt - tau).T @ np.linalg.inv(process_covariance(dt))
+    if q_dt_inv is None:
+        q_dt_inv = np.linalg.inv(process_covariance(dt))
+    psi = process_covariance(tau) @ transition(dt - tau).T @ q_dt_inv
     lam = transition(tau) - psi @ transition(dt)
     return lam, psi
 
@@ -51,8 +55,9 @@ def interpolation_weights(dt: float, fractions: np.ndarray) -> np.ndarray:
     ``fractions`` are tau/dt in [0, 1]. Row 0 of W gives the position, row 1 the velocity.
     """
     weights = np.empty((len(fractions), 2, 4))
+    q_dt_inv = np.linalg.inv(process_covariance(dt))  # one inverse for every fraction
     for k, fraction in enumerate(fractions):
-        lam, psi = interpolation_matrices(dt, float(fraction) * dt)
+        lam, psi = interpolation_matrices(dt, float(fraction) * dt, q_dt_inv)
         weights[k, :, 0:2] = lam
         weights[k, :, 2:4] = psi
     return weights

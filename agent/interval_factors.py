@@ -126,9 +126,12 @@ def add_batched_checks(graph: gtsam.NonlinearFactorGraph, problem: factors.Inter
     batch = BatchedIntervals(problem, config.support_states, config.intervals_per_factor)
     sigmas = factors.interval_sigmas(problem, config.sigma_obstacle, config.sigma_proximity,
                                      config.sigma_speed, config.sigma_lane, config.sigma_consistency)
+    models = {}  # one noise model per chunk length: all but the last chunk share one
     for f, (first, end) in enumerate(batch.chunks):
-        model = gtsam.noiseModel.Diagonal.Sigmas(np.tile(sigmas, end - first))
-        graph.add(gtsam.CustomFactor(model, chunk_keys(first, end), functools.partial(_chunk_error, batch, f)))
+        if end - first not in models:
+            models[end - first] = gtsam.noiseModel.Diagonal.Sigmas(np.tile(sigmas, end - first))
+        graph.add(gtsam.CustomFactor(models[end - first], chunk_keys(first, end),
+                                     functools.partial(_chunk_error, batch, f)))
     return batch
 
 
