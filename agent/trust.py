@@ -77,7 +77,7 @@ def belief(alpha: np.ndarray, beta: np.ndarray) -> np.ndarray:
 def graded(error: float, tolerance: float) -> tuple[float, float]:
     """(success, failure) of an error against a tolerance: full success up to the
     tolerance, full failure from twice the tolerance, linear in between."""
-    failure = float(np.clip((error - tolerance) / tolerance, 0.0, 1.0))
+    failure = float(min(max((error - tolerance) / tolerance, 0.0), 1.0))  # np.clip's value, NaN kept, without its call
     return 1.0 - failure, failure
 
 
@@ -89,7 +89,7 @@ def lower_bound(alpha: float, beta: float, quantile: float) -> float:
 def epsilon_gain(tau: float, config: TrustConfig) -> float:
     """g(tau): 1 for a trusted peer, up to epsilon_gain_max for an untrusted one."""
     span = config.tau_full - config.tau_floor
-    lack = float(np.clip((config.tau_full - tau) / span, 0.0, 1.0))
+    lack = float(min(max((config.tau_full - tau) / span, 0.0), 1.0))
     return 1.0 + (config.epsilon_gain_max - 1.0) * lack
 
 
