@@ -80,6 +80,8 @@ def peer_gaps(p: np.ndarray, times: np.ndarray, peer: Plan) -> np.ndarray:
     """gap_k above between ``p`` (T, 2: our plan at ``times``) and ``peer``'s plan at the
     same ``times`` (T,: not NaN, as Plan.state_at asks)."""
     times = np.ascontiguousarray(times, dtype=float)
+    if len(p) != len(times):  # the compiled loop reads p at every time
+        raise ValueError(f"{len(p)} positions for {len(times)} times")
     if np.isnan(times).any():  # the compiled loop would read outside the peer's plan
         raise ValueError("a plan asked for its state at a time that is not a number")
     out = np.empty(len(times))

@@ -57,3 +57,9 @@ def test_a_time_that_is_not_a_number_is_refused():
     peer = Plan(0.0, 1.0, np.zeros((3, 2)), np.zeros((3, 2)))
     with pytest.raises(ValueError, match="not a number"):
         peer_gaps(np.zeros((2, 2)), np.array([0.0, np.nan]), peer)
+
+
+def test_positions_and_times_must_pair_up():
+    peer = Plan(0.0, 1.0, np.zeros((3, 2)), np.zeros((3, 2)))
+    with pytest.raises(ValueError, match="2 positions for 3 times"):
+        peer_gaps(np.zeros((2, 2)), np.zeros(3), peer)
