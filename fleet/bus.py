@@ -320,9 +320,14 @@ class FleetBus:
             if name == HEARTBEAT:
                 self._entities.append(session.declare_subscriber(fleet_key(fleet, name), self._on_sample))
             else:
+                # The latest start or stop from the publisher's cache when it is found, and again
+                # whenever its heartbeat (every 0.5 s) tells of one we missed: the start is put
+                # once, and in CI two of four cars behind a router never got it (the history
+                # alone had asked before it was put) and waited out the run.
                 self._entities.append(zext.declare_advanced_subscriber(
                     session, fleet_key(fleet, name), self._on_sample,
-                    history=zext.HistoryConfig(detect_late_publishers=True, max_samples=1)))
+                    history=zext.HistoryConfig(detect_late_publishers=True, max_samples=1),
+                    recovery=zext.RecoveryConfig(heartbeat=True)))
         self._entities.append(session.liveliness().declare_subscriber(
             every_car(fleet, ALIVE), self._on_liveliness, history=True))
 

@@ -13,8 +13,10 @@ Keys (F the fleet, N the car id):
     trustfg/F/N/clock    car N's queryable: answers a Clock message (its clock), for
                          the operator's clock check (trustfg check)
     trustfg/F/start      Start        the operator's go for a trial (cached, late joiners
-                                      get it; a car takes it only before its departure)
-    trustfg/F/stop       Stop         the operator's e-stop, release or abort (cached)
+                                      get it, a missed one is recovered at the publisher's
+                                      next heartbeat; a car takes it only before its departure)
+    trustfg/F/stop       Stop         the operator's e-stop, release or abort (cached, recovered
+                                      the same way)
     trustfg/F/heartbeat  Heartbeat    an operator's session is alive (the deadman)
     trustfg/F/truth      mocap-sim's ground truth, in recordings only (never on the bus)
 

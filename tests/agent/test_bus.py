@@ -89,6 +89,38 @@ def test_a_late_joiner_gets_the_latest_new_plan_at_once_and_repeats_go_best_effo
             assert plans[-1] == plan and b"old" not in plans  # the reliable path's cache: the latest
 
 
+def test_a_start_the_car_missed_is_recovered_at_the_operators_next_heartbeat():
+    """The start is put once. A car whose subscriber found the operator's publisher before
+    the start existed (its history came back empty) and then missed the put -- two of four
+    cars behind a router in CI waited out a whole run -- gets it from the publisher's cache
+    when the publisher's heartbeat tells of it. The put is kept in the operator's session
+    here (``allowed_destination``), so the car can only have it by that recovery."""
+    import zenoh
+    import zenoh.ext as zext
+
+    from trustfg.fleet.bus import zenoh_config
+    from trustfg.fleet.keys import fleet_key
+
+    a = endpoint()
+    with FleetBus(BusConfig(listen=(a,)), FLEET, 1) as car:
+        session = zenoh.open(zenoh_config(BusConfig(listen=(endpoint(),), connect=(a,))))
+        try:
+            start = zext.declare_advanced_publisher(
+                session, fleet_key(FLEET, "start"), cache=zext.CacheConfig(max_samples=1), publisher_detection=True,
+                sample_miss_detection=zext.MissDetectionConfig(heartbeat=0.5),
+                allowed_destination=zenoh.Locality.SESSION_LOCAL)
+            time.sleep(1.5)  # the car found the publisher, asked its history, and got nothing
+            assert not [r for r in car.drain() if r.kind == "start"]
+            message = messages.encode(messages.StartMessage(1, time.time(), 1, {1: (time.time() + 5.0, 0.3)}))
+            start.put(message)
+            got = []
+            assert wait_for(lambda: (got.extend(car.drain()), any(r.kind == "start" for r in got))[1], 5.0)
+            assert [r.payload for r in got if r.kind == "start"] == [message]
+            start.undeclare()
+        finally:
+            session.close()
+
+
 def test_liveliness_reports_a_departed_car():
     a = endpoint()
     with FleetBus(BusConfig(listen=(a,)), FLEET, None) as observer:
