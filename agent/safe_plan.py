@@ -124,6 +124,9 @@ class Outcome:
     blocked_by: tuple[int, ...] = ()
     """Peers (indices of ``request.peers``; ids once the agent has them) that a plan of
     this replan failed verification against."""
+    first_broke: tuple[str, ...] = ()
+    """What the first plan tried broke, when it failed verification: the kinds of its
+    conflicts ('limits', 'obstacle', 'peer'), sorted; empty when it passed (or raised)."""
 
 
 def plan_safely(request: PlanRequest, bounds: Bounds, planner: PlannerConfig, config: VerifyConfig,
@@ -141,6 +144,7 @@ def plan_safely(request: PlanRequest, bounds: Bounds, planner: PlannerConfig, co
         return Outcome(result.plan, UNVERIFIED, result, None, ("warm" if request.warm_start else "cold",))
     tried: list[str] = []
     blocked: set[int] = set()
+    first_broke: tuple[str, ...] = ()
     last: PlanResult | None = None
     name = "warm" if request.warm_start is not None else "cold"
     attempt: PlanRequest | None = request
@@ -167,8 +171,10 @@ def plan_safely(request: PlanRequest, bounds: Bounds, planner: PlannerConfig, co
                         tried.append("pass")
                         return Outcome(passed[0].plan, RETRY, _timed(passed[0], started), passed[1], tuple(tried))
                 return Outcome(result.plan, outcome, _timed(result, started), verdict, tuple(tried),
-                               tuple(sorted(blocked)))
+                               tuple(sorted(blocked)), first_broke)
             blocked.update(c.peer for c in verdict.conflicts if c.kind == "peer")
+            if len(tried) == 1:
+                first_broke = tuple(sorted({c.kind for c in verdict.conflicts}))
         else:
             verdict = None
         if (len(tried) >= config.max_attempts or (clock and (clock() - budget_start) * 1e3 > config.budget_ms)
@@ -178,7 +184,7 @@ def plan_safely(request: PlanRequest, bounds: Bounds, planner: PlannerConfig, co
     plan, verdict = fallback(last_verified, request, bounds, sdf, config)
     base = last or PlanResult(plan, 0, math.nan, math.nan, 0.0, request.warm_start is not None)
     return Outcome(plan, FALLBACK, _timed(dataclasses.replace(base, plan=plan), started), verdict, tuple(tried),
-                   tuple(sorted(blocked)))
+                   tuple(sorted(blocked)), first_broke)
 
 
 def backs_away(plan: Plan, request: PlanRequest) -> bool:

@@ -20,7 +20,8 @@ passes and waits), the car process's other threads (Zenoh's; a NatNet socket thr
 the client one), and the command loop process (its ticks, and any other thread of it).
 Last, the replans' CPU over the run by how each ended (first try, retry, fallback, kept:
 ``replan_cpu`` in the car's ``--stats``), summed over the cars: count, CPU per replan and
-share of all replanning.
+share of all replanning; and what the first plan broke in the replans where it failed
+verification (``first_broke``: the limits, a peer, a wall, or several).
 Both NatNet clients are pulled by their readers (bridge.natnet_client, "Pull"): their
 work is in the main thread's "frames" and in the loop's ticks.
 """
@@ -30,6 +31,7 @@ from __future__ import annotations
 import argparse
 import statistics
 import tempfile
+from collections import Counter
 from pathlib import Path
 
 from trustfg.agent.scenario_files import load_scenario
@@ -78,6 +80,12 @@ def print_replan_outcomes(summary: dict) -> None:
     print("    replans by outcome (all cars, whole run): " + ", ".join(
         f"{outcome} {int(count)} x {seconds / count * 1e3:.1f} ms ({seconds / cpu:.0%})"
         for outcome, (count, seconds) in sorted(totals.items(), key=lambda kv: -kv[1][1])))
+    broke: Counter = Counter()
+    for per_car in summary.get("first_broke", {}).values():
+        broke.update(per_car or {})
+    replans = sum(int(count) for count, _ in totals.values())
+    print(f"    first plans that failed verification: {sum(broke.values())} of {replans} replans"
+          + ("; they broke " + ", ".join(f"{what} {n}" for what, n in broke.most_common()) if broke else ""))
 
 
 def print_breakdown(summary: dict) -> None:

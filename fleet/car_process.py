@@ -124,6 +124,9 @@ class CarProcess:
         """Snapshots as the car starts to drive and as it stops (its first trial)."""
         self.replan_cpu: dict[str, list[float]] = {}
         """Per replan outcome (first, retry, fallback, kept, ...): [replans, CPU seconds]."""
+        self.first_broke: Counter = Counter()
+        """Replans whose first plan failed verification, by what it broke ('limits',
+        'limits+peer', ...; agent.safe_plan.Outcome.first_broke)."""
 
     def _new_agent(self) -> CarAgent:
         """A fresh mind: a car plans every trial anew (``CarAgent.carry_over`` keeps what it
@@ -413,6 +416,8 @@ class CarProcess:
                 spent = self.replan_cpu.setdefault(outcome.outcome, [0, 0.0])
                 spent[0] += 1
                 spent[1] += time.thread_time() - started
+                if outcome.first_broke:
+                    self.first_broke["+".join(outcome.first_broke)] += 1
             aside = self.agent.deadlock.detour
             if parked and not self.agent.at_goal and aside is not None and aside.for_peer is not None:
                 if self.operation.step_aside(now, aside.for_peer):

@@ -161,5 +161,6 @@ def write_stats(path: Path, process: Any, bus: FleetBus | None) -> None:
         "cpu_driving": process.driving_cpu(),
         "replan_cpu": {outcome: {"count": int(count), "cpu_s": round(cpu, 4)}
                        for outcome, (count, cpu) in sorted(process.replan_cpu.items())},
+        "first_broke": dict(sorted(process.first_broke.items())),
     }
     path.write_text(json.dumps(stats, indent=1))

@@ -95,6 +95,7 @@ def summarise(scenario: Scenario, out: Path, recorder: Recorder, t_go: float | N
         "control": {str(i): (stats[i] or {}).get("control") for i in ids},
         "cpu_driving": {str(i): (stats[i] or {}).get("cpu_driving") for i in ids},
         "replan_cpu": {str(i): (stats[i] or {}).get("replan_cpu") for i in ids},
+        "first_broke": {str(i): (stats[i] or {}).get("first_broke") for i in ids},
         **_outcomes(ids, stats),
         "crashed": sorted(int(name.split()[1]) for name in crashed if name.startswith("car"))
         + (["mocap-sim"] if "mocap-sim" in crashed else []),

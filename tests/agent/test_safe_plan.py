@@ -96,6 +96,7 @@ def test_a_plan_through_the_middle_of_a_peer_is_retried_on_its_other_side(room):
                           SAFETY.epsilon_obstacle(R), peers=(PeerConstraint(peer, EPS),), warm_start=through)
     outcome = plan_safely(request, bounds(1), PLANNER, CONFIG, room, None)
     assert outcome.outcome == RETRY and outcome.tried[:3] == ("warm", "tighten", "other side")
+    assert outcome.first_broke == ("peer",)  # what the warm plan broke
     assert verify(outcome.plan, request.peers, bounds(1), room, CONFIG).ok
     once = plan_safely(request, bounds(1), PLANNER, dataclasses.replace(CONFIG, max_attempts=1), room, None)
     assert once.outcome == FALLBACK  # without the retries: no verified plan this replan
@@ -110,6 +111,7 @@ def test_a_clear_plan_verifies_first_try(room):
                           SAFETY.epsilon_obstacle(R))
     outcome = plan_safely(request, bounds(0), PLANNER, CONFIG, room, None)
     assert outcome.outcome == FIRST and outcome.tried == ("cold",) and outcome.verdict.ok
+    assert outcome.first_broke == ()
 
 
 def test_a_car_whose_goal_a_waiting_peer_stands_on_sets_off_with_a_finite_hold(room):
@@ -249,7 +251,7 @@ def test_a_plan_that_sets_off_while_the_car_stands_is_not_used(room, monkeypatch
                         lambda *a, **k: dataclasses.replace(result, plan=flying))
     outcome = plan_safely(request, bounds(0), PLANNER, CONFIG, room, None)
     assert outcome.tried[:2] == ("cold", "retimed"), outcome.tried
-    assert outcome.outcome == RETRY
+    assert outcome.outcome == RETRY and outcome.first_broke == ("limits",)
     assert np.linalg.norm(outcome.plan.velocities[0]) < 0.05
 
 

@@ -58,6 +58,11 @@ def test_four_car_processes_reach_their_goals_without_breach(honest):
                    if k in ("first", "retry", "fallback", "unverified", "kept") and v}
         assert {k: v["count"] for k, v in by_outcome.items()} == counted, (by_outcome, counted)
         assert all(v["cpu_s"] > 0 for v in by_outcome.values()), by_outcome
+        # What a first plan that failed verification broke: only replans that then
+        # retried or fell back can have one.
+        broke = summary["first_broke"][car]
+        assert all(set(what.split("+")) <= {"limits", "obstacle", "peer"} for what in broke), broke
+        assert sum(broke.values()) <= counted.get("retry", 0) + counted.get("fallback", 0), (broke, counted)
         # Both NatNet clients are pulled by their readers: no socket thread works (the car
         # process's would show as "natnet", the command loop's as its "other").
         assert driving["threads"]["natnet"] == 0 and driving["command_loop"]["other"] == 0, driving
