@@ -67,7 +67,8 @@ def main() -> None:
 
 
 def print_replan_outcomes(summary: dict) -> None:
-    """The replans' CPU over the whole run, summed over the cars, by how each ended."""
+    """The replans' CPU over the whole run, summed over the cars, by how each ended; then
+    how many first plans failed verification, and what they broke."""
     totals: dict[str, list[float]] = {}
     for per_car in summary.get("replan_cpu", {}).values():
         for outcome, entry in (per_car or {}).items():
