@@ -15,7 +15,10 @@ is unknown"), so faults are made with what it has:
 
 Everything needs root (``ip netns``, nftables); :func:`available` says whether we have it.
 A :class:`Lab` is a context manager that removes every namespace, link, rule and relay
-it made, also when a test fails.
+it made, also when a test fails. A lab whose process was killed cannot: each lab first
+writes who made it (pid and the process's start time) to ``OWNERS``, and
+:func:`sweep_stale` removes the namespaces and links of every lab whose maker is gone
+(the test session calls it as it starts; a lab does as it is entered).
 """
 
 from __future__ import annotations
@@ -23,6 +26,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import heapq
+import json
 import logging
 import os
 import random
@@ -35,10 +39,14 @@ import subprocess
 import threading
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 
 log = logging.getLogger(__name__)
 
 TABLE = "trustfg"
+OWNERS = Path("/run/trustfg-netem")
+"""One file per lab, ``<tag>.owner``: the pid and start time of the process that made it
+(``/run`` is a tmpfs, cleared at boot with the namespaces in ``/run/netns``)."""
 
 
 def available() -> str | None:
@@ -77,6 +85,56 @@ def _remove_namespace(name: str, within_s: float = 5.0) -> None:
         time.sleep(0.1)
 
 
+def _started(pid: int) -> int | None:
+    """The start time of process ``pid`` (clock ticks after boot), None if there is none:
+    with the pid, it names a process even after the pid is reused."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return None
+    return int(stat.rsplit(")", 1)[1].split()[19])  # field 22, counted after the name
+
+
+def _write_owner(tag: str) -> None:
+    OWNERS.mkdir(parents=True, exist_ok=True)
+    record = OWNERS / f"{tag}.owner"
+    draft = record.with_suffix(".draft")
+    draft.write_text(json.dumps({"pid": os.getpid(), "started": _started(os.getpid())}))
+    draft.replace(record)  # atomic: a sweep never reads half a record
+
+
+def _owner_alive(record: Path) -> bool:
+    try:
+        owner = json.loads(record.read_text())
+        return _started(int(owner["pid"])) == owner["started"]
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        log.warning("unreadable lab owner record %s (%s): its lab counts as stale", record, exc)
+        return False
+
+
+def sweep_stale() -> list[str]:
+    """Remove the namespaces and bridges of labs whose maker is gone (a test run killed
+    before its labs' ``__exit__``); return their tags. Labs of live processes, and
+    namespaces that no record names, are left alone."""
+    if not OWNERS.is_dir():
+        return []
+    swept = []
+    for record in sorted(OWNERS.glob("*.owner")):
+        if _owner_alive(record):
+            continue
+        tag = record.stem
+        prefix = f"tfg{tag}c"
+        listing = sh("ip", "netns", "list", check=False).stdout
+        for name in (line.split()[0] for line in listing.splitlines() if line.strip()):
+            if name.startswith(prefix):
+                _remove_namespace(name)
+        sh("ip", "link", "del", f"tfg{tag}br", check=False)
+        record.unlink(missing_ok=True)
+        log.warning("removed the network namespaces of lab %s, whose process is gone", tag)
+        swept.append(tag)
+    return swept
+
+
 @dataclass
 class Lab:
     car_ids: list[int]
@@ -111,6 +169,8 @@ class Lab:
     # --- lifecycle ---------------------------------------------------------------------
 
     def __enter__(self) -> "Lab":
+        sweep_stale()
+        _write_owner(self.tag)  # before anything is made: nothing of a lab lacks an owner
         try:
             sh("ip", "link", "add", self.bridge, "type", "bridge")
             self.created.append(("link", self.bridge))
@@ -142,6 +202,7 @@ class Lab:
             else:
                 sh("ip", "link", "del", name, check=False)
         self.created.clear()
+        (OWNERS / f"{self.tag}.owner").unlink(missing_ok=True)
 
     def wrap(self, name: str, argv: list[str]) -> list[str]:
         """Start car processes inside their namespaces; everything else stays put."""

@@ -99,6 +99,17 @@ def pytest_xdist_make_scheduler(config, log):
     return TwoGroups(config, log)
 
 
+def pytest_sessionstart(session):
+    """Before any test (in the controller, or a run without xdist): the network namespaces
+    of fault labs whose test run was killed go, so that they do not fail this run's
+    leftover check (fleet.netem.sweep_stale: labs of live processes stay)."""
+    from trustfg.fleet import netem
+
+    if getattr(session.config, "workerinput", None) is None and netem.available() is None:
+        for tag in netem.sweep_stale():
+            print(f"removed the network namespaces of a killed run's fault lab {tag}", file=sys.stderr)
+
+
 def pytest_collection_modifyitems(config, items):
     """The leftover check runs last, after every other test has cleaned up."""
     last = [item for item in items if item.nodeid.endswith("test_nothing_is_left_behind")]

@@ -1,5 +1,7 @@
 """The delaying TCP and UDP relays of the fault suite (no root needed)."""
 
+import json
+import os
 import socket
 import threading
 import time
@@ -111,3 +113,53 @@ def test_lab_needs_root_or_says_why():
     if reason is None:
         with Lab([1]) as lab:
             assert lab.car_ip(1).startswith("10.77.")
+
+
+@pytest.mark.skipif(available() is not None, reason=str(available()))
+def test_a_killed_runs_lab_is_swept_and_a_live_one_is_not():
+    """A test run killed before its lab's __exit__ leaves namespaces behind (it failed the
+    next CI run's leftover check once): the next sweep removes them, never a live lab's."""
+    import signal
+    import subprocess
+    import sys
+
+    from trustfg.fleet import netem
+
+    script = ("import sys, time\nfrom trustfg.fleet.netem import Lab\nlab = Lab([1, 2]).__enter__()\n"
+              "print(lab.tag, flush=True)\ntime.sleep(60)\n")
+    child = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True)
+    try:
+        tag = child.stdout.readline().strip()
+        assert len(tag) == 4, tag
+        with Lab([3]) as live:
+            def namespaces(t):
+                listing = subprocess.run(["ip", "netns", "list"], capture_output=True, text=True).stdout
+                return sorted(line.split()[0] for line in listing.splitlines() if line.startswith(f"tfg{t}c"))
+
+            assert namespaces(tag) == [f"tfg{tag}c1", f"tfg{tag}c2"]
+            assert netem.sweep_stale() == []  # its maker still runs
+            assert namespaces(tag) != []
+            child.send_signal(signal.SIGKILL)
+            child.wait(10)
+            assert netem.sweep_stale() == [tag]
+            assert namespaces(tag) == []
+            assert not (netem.OWNERS / f"{tag}.owner").exists()
+            assert subprocess.run(["ip", "link", "show", f"tfg{tag}br"], capture_output=True).returncode != 0
+            assert namespaces(live.tag) == [f"tfg{live.tag}c3"]  # the live lab is untouched
+        assert namespaces(live.tag) == [] and not (netem.OWNERS / f"{live.tag}.owner").exists()
+    finally:
+        child.kill()
+        child.wait(10)
+        netem.sweep_stale()
+
+
+def test_an_unreadable_owner_record_counts_as_stale(tmp_path, monkeypatch):
+    from trustfg.fleet import netem
+
+    monkeypatch.setattr(netem, "OWNERS", tmp_path)
+    (tmp_path / "abcd.owner").write_text("{not json")
+    assert netem._owner_alive(tmp_path / "abcd.owner") is False
+    (tmp_path / "abce.owner").write_text(json.dumps({"pid": os.getpid(), "started": netem._started(os.getpid())}))
+    assert netem._owner_alive(tmp_path / "abce.owner") is True
+    (tmp_path / "abcf.owner").write_text(json.dumps({"pid": os.getpid(), "started": -1}))  # the pid reused
+    assert netem._owner_alive(tmp_path / "abcf.owner") is False
