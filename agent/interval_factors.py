@@ -68,6 +68,7 @@ class BatchedIntervals:
         self._lock = threading.Lock()
         self._values: gtsam.Values | None = None
         self._residuals: list[np.ndarray] = []
+        self._jacobian = np.zeros(0)
         self._blocks: list[np.ndarray] = []
         self._jacobians: list[gtsam.JacobianVector | None] = []
         self.evaluations = 0
@@ -82,18 +83,31 @@ class BatchedIntervals:
             if want_jacobian:
                 jacobian = self._jacobians[f]
                 if jacobian is None:  # converted to Eigen once per point, on first use
+                    if not self._blocks:
+                        self._lay_out_blocks()
                     jacobian = self._jacobians[f] = gtsam.JacobianVector(list(self._blocks[f]))
             return self._residuals[f], jacobian
 
     def _evaluate(self, values: gtsam.Values) -> None:
         positions = gtsam.utilities.extractVectors(values, "x")
         velocities = gtsam.utilities.extractVectors(values, "v")
-        residual, jacobian = factors.evaluate_intervals(self.problem, positions, velocities)
-        # (I, R, 4, 2) as a view of (I, 4, R, 2): block j of interval i, states ordered
-        # (p_i, v_i, p_i+1, v_i+1).
-        blocks = jacobian.transpose(0, 2, 1, 3)
-        rows = residual.shape[1]
-        self._residuals, self._blocks = [], []
+        residual, self._jacobian = factors.evaluate_intervals(self.problem, positions, velocities)
+        self._residuals = []
+        for first, end in self._runs:
+            c = min(self._per_factor, end - first)
+            self._residuals.extend(residual[first:end].reshape((end - first) // c, c * residual.shape[1]))
+        self._blocks = []  # laid out when a Jacobian is first asked for at this point: LM
+        # evaluates every trial point, and linearises only those it accepts
+        self._jacobians = [None] * len(self.chunks)
+        self._values = gtsam.Values(values)
+        self.evaluations += 1
+
+    def _lay_out_blocks(self) -> None:
+        """Each chunk's Jacobian blocks (one per key) from the intervals' Jacobian."""
+        # (I, 4, R, 2) as a view of the (I, R, 4, 2) Jacobian: block j of interval i,
+        # states ordered (p_i, v_i, p_i+1, v_i+1).
+        blocks = self._jacobian.transpose(0, 2, 1, 3)
+        rows = blocks.shape[2]
         for first, end in self._runs:
             # Chunks of c intervals over [first, end), at once. Keys of a chunk: 2 per state,
             # c + 1 states; interval l of the chunk fills its own rows of the blocks of
@@ -107,10 +121,6 @@ class BatchedIntervals:
             for local in range(c):
                 dense[:, 2 * local:2 * local + 4, :, local] = own[:, local]
             self._blocks.extend(dense.reshape(count, 2 * (c + 1), 2, c * rows).transpose(0, 1, 3, 2))
-            self._residuals.extend(residual[first:end].reshape(count, c * rows))
-        self._jacobians = [None] * len(self.chunks)
-        self._values = gtsam.Values(values)
-        self.evaluations += 1
 
 
 def _chunk_error(batch: BatchedIntervals, f: int, this: gtsam.CustomFactor,
