@@ -24,6 +24,14 @@ share of all replanning; and what the first plan broke in the replans where it f
 verification (``first_broke``: the limits, a peer, a wall, or several).
 Both NatNet clients are pulled by their readers (bridge.natnet_client, "Pull"): their
 work is in the main thread's "frames" and in the loop's ticks.
+
+``--focus K``: every car process but car K's runs at nice 19 (their command loops keep
+their real-time priority). On cores the fleet fills, every car's share is capped at what
+the machine gives it, not what it would take; with the others yielding, car K takes what
+it needs, so its share (and its breakdown, printed apart) is a car's demand with that
+many peers. The other cars then share what car K leaves, about what each gets when all
+are equal (two cores, eight cars: 0.2 of a core each), so the scene it plans in stays
+much the same.
 """
 
 from __future__ import annotations
@@ -44,13 +52,17 @@ def main() -> None:
     parser.add_argument("--scenes", nargs="+", default=["circle-4", "circle-8", "circle-16"],
                         help="shipped scene names or files (default: %(default)s)")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--focus", type=int, default=None, metavar="K",
+                        help="the other car processes at nice 19: car K's demand, uncapped")
     args = parser.parse_args()
     print(f"car process CPU, share of one core from the go to the first arrival ({usable_cores()} cores)")
     print(f"{'scene':>16} {'peers':>5} {'mean':>6} {'min':>6} {'max':>6} {'all processes':>14} {'replan p95 ms':>14}")
     for name in args.scenes:
         scenario = loopback_fleet(load_scenario(name), None, None, 0.0)
+        if args.focus is not None and args.focus not in [car.id for car in scenario.cars]:
+            parser.error(f"--focus {args.focus}: {scenario.name} has no car {args.focus}")
         with tempfile.TemporaryDirectory() as folder:
-            summary = run(scenario, Path(folder), seed=args.seed)
+            summary = run(scenario, Path(folder), seed=args.seed, wrap=yielding_except(args.focus))
         window = "share_go_first_arrival"
         entries = [summary["cpu"].get(f"car {i}") or {} for i in summary["car_ids"]]
         if any(entry.get(window) is None for entry in entries):  # no car arrived: no such window
@@ -64,6 +76,21 @@ def main() -> None:
               f"{max(cars):>6.3f} {total:>14.2f} {p95:>14.1f}")
         print_breakdown(summary)
         print_replan_outcomes(summary)
+        if args.focus is not None:
+            focus = summary["cpu"].get(f"car {args.focus}") or {}
+            print(f"    car {args.focus}, the others at nice 19: {focus.get(window) or float('nan'):.3f} of a core "
+                  f"from the go to the first arrival")
+            print_breakdown(summary, cars=[args.focus])
+
+
+def yielding_except(focus: int | None):
+    """A process wrapper (fleet.launch.run's ``wrap``) that starts every car process but
+    ``focus``'s at nice 19; None: all as they are."""
+    def wrap(name: str, argv: list[str]) -> list[str]:
+        if focus is not None and name.startswith("car ") and name != f"car {focus}":
+            return ["nice", "-n", "19", *argv]
+        return argv
+    return wrap
 
 
 def print_replan_outcomes(summary: dict) -> None:
@@ -89,10 +116,13 @@ def print_replan_outcomes(summary: dict) -> None:
           + ("; they broke " + ", ".join(f"{what} {n}" for what, n in broke.most_common()) if broke else ""))
 
 
-def print_breakdown(summary: dict) -> None:
-    """The mean over the cars of each part's share of one core while the car drove."""
+def print_breakdown(summary: dict, cars: list[int] | None = None) -> None:
+    """The mean over the cars (or only ``cars``) of each part's share of one core while
+    the car drove."""
     parts: dict[str, list[float]] = {}
-    for entry in summary.get("cpu_driving", {}).values():
+    for car, entry in summary.get("cpu_driving", {}).items():
+        if cars is not None and int(car) not in cars:
+            continue
         if not entry or not entry["wall_s"] > 0:
             continue
         wall = entry["wall_s"]
