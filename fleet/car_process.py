@@ -68,7 +68,7 @@ from .car_report import WaitingLog, status_counters, waiting_for, write_stats
 from .command import command_parser, configured, stop_on_signals
 from .command_loop import Report
 from .command_process import CommandProcess
-from .cpu import Sections, Snapshot, breakdown, snapshot
+from .cpu import Sections, Snapshot, Tally, breakdown, snapshot
 from .keys import HEARD_BY_CARS
 from .laps import Laps
 
@@ -122,8 +122,8 @@ class CarProcess:
         """The main thread's CPU by section of its loop (fleet.cpu)."""
         self._driving_cpu: list[Snapshot] = []
         """Snapshots as the car starts to drive and as it stops (its first trial)."""
-        self.replan_cpu: dict[str, list[float]] = {}
-        """Per replan outcome (first, retry, fallback, kept, ...): [replans, CPU seconds]."""
+        self.replan_cpu: dict[str, Tally] = {}
+        """Per replan outcome (first, retry, fallback, kept, ...): the replans and their CPU."""
         self.first_broke: Counter = Counter()
         """Replans whose first plan failed verification, by what it broke ('limits',
         'limits+peer', ...; agent.safe_plan.Outcome.first_broke)."""
@@ -413,9 +413,7 @@ class CarProcess:
                 self.counters["replan_errors"] += 1
             outcome = self.agent.last_outcome
             if outcome is not None and outcome is not before:  # a replan ended: its CPU, by how
-                spent = self.replan_cpu.setdefault(outcome.outcome, [0, 0.0])
-                spent[0] += 1
-                spent[1] += time.thread_time() - started
+                self.replan_cpu.setdefault(outcome.outcome, Tally()).add(time.thread_time() - started)
                 if outcome.first_broke:
                     self.first_broke["+".join(outcome.first_broke)] += 1
             aside = self.agent.deadlock.detour

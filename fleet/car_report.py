@@ -159,8 +159,8 @@ def write_stats(path: Path, process: Any, bus: FleetBus | None) -> None:
         "link_sent": process.command.link.get("link_sent"),
         "link_answers": process.command.link.get("link_answers"),
         "cpu_driving": process.driving_cpu(),
-        "replan_cpu": {outcome: {"count": int(count), "cpu_s": round(cpu, 4)}
-                       for outcome, (count, cpu) in sorted(process.replan_cpu.items())},
+        "replan_cpu": {outcome: {"count": tally.count, "cpu_s": round(tally.cpu_s, 4)}
+                       for outcome, tally in sorted(process.replan_cpu.items())},
         "first_broke": dict(sorted(process.first_broke.items())),
     }
     path.write_text(json.dumps(stats, indent=1))

@@ -174,6 +174,18 @@ class Sections:
         self._last = now
 
 
+@dataclass
+class Tally:
+    """How many of something there were, and the CPU they took."""
+
+    count: int = 0
+    cpu_s: float = 0.0
+
+    def add(self, cpu_s: float) -> None:
+        self.count += 1
+        self.cpu_s += cpu_s
+
+
 @dataclass(frozen=True)
 class Snapshot:
     """One moment of a car's CPU: its main loop's sections and the kernel's per-thread counts
