@@ -44,16 +44,30 @@ def test_only_the_operators_page_stops_the_fleet_and_the_cars_stay_stopped_until
     fleet, port = operated
     ARTIFACTS.mkdir(exist_ok=True)
     assert wait_for(lambda: page_up(port), 30.0)
-    now = time.time()
-    fleet.session.start({car: (now + 0.5, 0.4) for car in fleet.ids})
-    assert wait_for(lambda: fleet.moving() == set(fleet.ids), 15.0), fleet.states()
     with sync_playwright() as pw:
         browser = pw.chromium.launch(executable_path=chromium(), args=CHROMIUM_FLAGS)
         try:
+            # Both pages load before the start: the intersection is driven in 10-15 s, and on
+            # a loaded CI machine the browser's start and two page loads once took longer,
+            # so that every car had arrived before the operator's page could stop one.
             stranger = browser.new_page()
             stranger.goto(f"http://127.0.0.1:{port}/")
             stranger.wait_for_selector("#estop", state="visible", timeout=20000)
-            pressed = time.time()
+            page = browser.new_page(viewport={"width": 1500, "height": 900})
+            page.goto(f"http://127.0.0.1:{port}/?token={TOKEN}")
+            page.wait_for_selector("#connection[data-state='connected']", timeout=20000)
+            assert "token" not in page.url  # not left in the address bar
+            # The stop is timed from the click as the page got it (the event's own stamp), as
+            # an operator's mouse click would be: Playwright's checks before it dispatches
+            # (visible, stable, hit target: round trips into a page that shares two cores
+            # with the fleet) took 0.5-1.3 s of the 1 s once on a loaded CI machine, and no
+            # real mouse makes them. They are reported below, not bounded.
+            page.evaluate("""() => document.getElementById("estop").addEventListener("click",
+                e => { window.clickedAt = (performance.timeOrigin + e.timeStamp) / 1000; }, {capture: true})""")
+
+            now = time.time()
+            fleet.session.start({car: (now + 0.5, 0.4) for car in fleet.ids})
+            assert wait_for(lambda: fleet.moving() == set(fleet.ids), 15.0), fleet.states()
             stranger.click("#estop")
             stranger.wait_for_selector("#operator-status[data-result='refused']", timeout=5000)
             time.sleep(0.5)
@@ -63,18 +77,6 @@ def test_only_the_operators_page_stops_the_fleet_and_the_cars_stay_stopped_until
             assert set(fleet.states().values()) == {"driving"}, fleet.states()
             assert fleet.moving(), fleet.states()
 
-            page = browser.new_page(viewport={"width": 1500, "height": 900})
-            page.goto(f"http://127.0.0.1:{port}/?token={TOKEN}")
-            page.wait_for_selector("#connection[data-state='connected']", timeout=20000)
-            assert "token" not in page.url  # not left in the address bar
-            assert fleet.moving(), fleet.states()
-            # The stop is timed from the click as the page got it (the event's own stamp), as
-            # an operator's mouse click would be: Playwright's checks before it dispatches
-            # (visible, stable, hit target: round trips into a page that shares two cores
-            # with the fleet) took 0.5-1.3 s of the 1 s once on a loaded CI machine, and no
-            # real mouse makes them. They are reported below, not bounded.
-            page.evaluate("""() => document.getElementById("estop").addEventListener("click",
-                e => { window.clickedAt = (performance.timeOrigin + e.timeStamp) / 1000; }, {capture: true})""")
             pressed = time.time()
             page.click("#estop")
             clicked = page.evaluate("window.clickedAt")
