@@ -66,11 +66,12 @@ def sh(*argv: str, stdin: str | None = None, check: bool = True) -> subprocess.C
     return done
 
 
-def _remove_namespace(name: str, within_s: float = 5.0) -> None:
+def _remove_namespace(name: str, within_s: float = 5.0) -> bool:
     """Kill what still runs in a namespace and delete it, retrying for ``within_s``; a
     namespace that will not go is logged, never silently left. (A CI run once left four
     behind with a single unchecked ``ip netns del``; here deletion succeeded even with
-    processes inside, so the cause is unknown and the retry is a guard, not a diagnosis.)"""
+    processes inside, so the cause is unknown and the retry is a guard, not a diagnosis.)
+    Whether it is gone."""
     deadline = time.monotonic() + within_s
     while True:
         for pid in sh("ip", "netns", "pids", name, check=False).stdout.split():
@@ -78,10 +79,10 @@ def _remove_namespace(name: str, within_s: float = 5.0) -> None:
                 os.kill(int(pid), signal.SIGKILL)
         done = sh("ip", "netns", "del", name, check=False)
         if done.returncode == 0 or "No such file" in done.stderr:
-            return
+            return True
         if time.monotonic() > deadline:
             log.error("could not remove network namespace %s: %s", name, done.stderr.strip())
-            return
+            return False
         time.sleep(0.1)
 
 
@@ -118,18 +119,18 @@ def sweep_stale() -> list[str]:
     namespaces that no record names, are left alone."""
     if not OWNERS.is_dir():
         return []
+    stale = [record for record in sorted(OWNERS.glob("*.owner")) if not _owner_alive(record)]
+    if not stale:
+        return []
+    listing = sh("ip", "netns", "list", check=False).stdout
+    namespaces = [line.split()[0] for line in listing.splitlines() if line.strip()]
     swept = []
-    for record in sorted(OWNERS.glob("*.owner")):
-        if _owner_alive(record):
-            continue
+    for record in stale:
         tag = record.stem
-        prefix = f"tfg{tag}c"
-        listing = sh("ip", "netns", "list", check=False).stdout
-        for name in (line.split()[0] for line in listing.splitlines() if line.strip()):
-            if name.startswith(prefix):
-                _remove_namespace(name)
+        gone = [_remove_namespace(name) for name in namespaces if name.startswith(f"tfg{tag}c")]
         sh("ip", "link", "del", f"tfg{tag}br", check=False)
-        record.unlink(missing_ok=True)
+        if all(gone):  # else the record stays, for the next sweep to try again
+            record.unlink(missing_ok=True)
         log.warning("removed the network namespaces of lab %s, whose process is gone", tag)
         swept.append(tag)
     return swept
@@ -196,13 +197,15 @@ class Lab:
     def __exit__(self, *exc) -> None:
         for relay in self.relays:
             relay.close()
+        gone = True
         for kind, name in reversed(self.created):
             if kind == "netns":
-                _remove_namespace(name)
+                gone = _remove_namespace(name) and gone
             else:
                 sh("ip", "link", "del", name, check=False)
         self.created.clear()
-        (OWNERS / f"{self.tag}.owner").unlink(missing_ok=True)
+        if gone:  # a namespace that would not go keeps its owner record: a later sweep retries
+            (OWNERS / f"{self.tag}.owner").unlink(missing_ok=True)
 
     def wrap(self, name: str, argv: list[str]) -> list[str]:
         """Start car processes inside their namespaces; everything else stays put."""
