@@ -246,6 +246,27 @@ def machine_load(cpu: dict[str, dict | None], cores: int, until: str = "first_ar
     return {"busy_cores": round(busy, 2), "cores": cores, "saturated": busy >= SATURATED * cores, "until": until}
 
 
+CAR_SHARE = 0.2
+"""About what one car process takes of a core while the fleet drives, its command loop
+included: 0.15-0.17 with 3 peers, 0.20-0.25 with 7 (``benchmarks/bench_cpu.py``, 2 cores
+AMD EPYC, stops 45-54; docs/architecture.md "CPU"). A rough figure for a warning before a
+run, not a budget: more peers take more."""
+FLEET_SHARE = 0.15
+"""mocap-sim and the launcher together in the same runs (0.07-0.11 and 0.05)."""
+
+
+def capacity_note(cars: int, cores: int) -> str | None:
+    """What to tell before a run of ``cars`` car processes on ``cores`` cores whose demand,
+    by CAR_SHARE and FLEET_SHARE, is more than the cores (None: it fits)."""
+    need = cars * CAR_SHARE + FLEET_SHARE
+    if need <= cores:
+        return None
+    return (f"{cars} car processes need about {need:.1f} cores (a car about {CAR_SHARE} of one while it drives, "
+            f"measured on 2 cores AMD EPYC) and this machine gives them {cores}: the cars will wait for the CPU, "
+            "replans will run late and end in the braking fallback more often, permits may lapse and stop cars, "
+            "and the run's timings will measure the machine, not the planner")
+
+
 def usable_cores() -> int:
     """The cores this process may run on (its affinity: a container or taskset may allow
     fewer than the machine has)."""

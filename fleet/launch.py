@@ -53,7 +53,7 @@ from ..agent.scenario_files import dump_scenario, load_scenario
 from ..bridge import natnet
 from .bus import FleetBus
 from .command import command_parser, configured, stop_on_signals
-from .cpu import machine_load, usable_cores
+from .cpu import capacity_note, machine_load, usable_cores
 from .fleet_sim import draw_departures
 from .laps import final_legs
 from .link_keys import with_link_keys
@@ -69,9 +69,21 @@ log = logging.getLogger(__name__)
 START_LEAD_S = 1.0
 
 
+DEFAULT_SCENES = (("intersection", 4), ("intersection-8", 8), ("intersection-16", 16))
+"""The shipped scenes ``trustfg sim`` runs without --scenario, by fleet size: the crossing,
+with queues on its approaches for more cars."""
+
+
 def default_scenario(cars: int | None) -> str:
-    """The shipped scene ``trustfg sim`` runs without --scenario."""
-    return "intersection-8" if cars is not None and cars > 4 else "intersection"
+    """The shipped scene ``trustfg sim`` runs without --scenario: the smallest of
+    DEFAULT_SCENES with at least ``cars`` cars (None: the crossing of four)."""
+    for name, size in DEFAULT_SCENES:
+        if cars is None or cars <= size:
+            return name
+    name, size = DEFAULT_SCENES[-1]
+    raise ConfigError(f"no shipped scene has {cars} cars (the largest, {name} and circle-16, have {size}): "
+                      f"make one with 'trustfg scenario generate --kind circle --cars {cars} --out FILE' "
+                      "and pass --scenario FILE")
 
 
 def loopback_fleet(scenario: Scenario, cars: int | None, liar: int | list[int] | None = None,
@@ -84,7 +96,7 @@ def loopback_fleet(scenario: Scenario, cars: int | None, liar: int | list[int] |
     at ``car_ips[N]`` (default: the same address): the fault tests give each its own netns."""
     chosen = scenario.cars if cars is None else scenario.cars[:cars]
     if cars is not None and len(chosen) < cars:
-        raise ConfigError(f"the scenario has {len(scenario.cars)} cars, {cars} were asked for")
+        raise ConfigError(f"scenario {scenario.name!r} has {len(scenario.cars)} cars, {cars} were asked for")
     liars = [] if liar is None else [liar] if isinstance(liar, int) else list(liar)
     named = set(liars) | set(clock_offsets or {})
     if named - {c.id for c in chosen}:
@@ -304,8 +316,8 @@ def _port_free(port: int) -> bool:
 def main(argv: list[str] | None = None) -> int:
     parser = command_parser("trustfg sim", __doc__)
     parser.add_argument("--scenario", default=None,
-                        help="a scenario file, or a shipped scene's name (default: intersection, or "
-                             "intersection-8 for more than 4 cars)")
+                        help="a scenario file, or a shipped scene's name (default: intersection; "
+                             "intersection-8 for 5-8 cars, intersection-16 for 9-16)")
     parser.add_argument("--cars", type=int, default=None, help="use the first N cars of the scenario")
     parser.add_argument("--liar", type=int, action="append", default=None, metavar="ID",
                         help="a car that lies (repeatable: --attack collude needs two)")
@@ -349,6 +361,9 @@ def main(argv: list[str] | None = None) -> int:
     problem = scene_problem(fleet)
     if problem is not None:
         print(f"trustfg sim: warning: {problem}", file=sys.stderr)
+    crowded = capacity_note(len(fleet.cars), usable_cores())
+    if crowded is not None:
+        print(f"trustfg sim: warning: {crowded}", file=sys.stderr)
     out = args.out or Path("runs") / time.strftime("sim-%Y%m%d-%H%M%S")
     stop = stop_on_signals(threading.Event())
     try:

@@ -6,12 +6,15 @@ import time
 import pytest
 
 from trustfg.fleet.cpu import (
+    CAR_SHARE,
     CLOCK_TICKS_PER_S,
+    FLEET_SHARE,
     CpuMeter,
     Read,
     Sections,
     Snapshot,
     breakdown,
+    capacity_note,
     parse_stat_ticks,
     read_thread_ticks,
     read_ticks,
@@ -138,3 +141,17 @@ def test_a_run_that_fills_the_cores_is_called_saturated():
     assert machine_load(starved, 2)["busy_cores"] == 0.0
     assert machine_load(starved, 2, "end") == {"busy_cores": 1.84, "cores": 2, "saturated": True, "until": "end"}
     assert 1 <= usable_cores() <= (os.cpu_count() or 1)
+
+
+def test_a_fleet_that_fits_the_cores_gets_no_capacity_note():
+    assert capacity_note(4, 2) is None
+    fits = int((2 - FLEET_SHARE) // CAR_SHARE)  # the most cars two cores hold by the estimate
+    assert capacity_note(fits, 2) is None
+    assert capacity_note(fits + 1, 2) is not None
+    assert capacity_note(fits + 1, 4) is None
+
+
+def test_the_capacity_note_says_how_many_cores_the_fleet_needs_and_has():
+    note = capacity_note(16, 2)
+    assert note.startswith("16 car processes need about 3.4 cores")
+    assert "gives them 2" in note and "wait for the CPU" in note
