@@ -216,6 +216,22 @@ class Received:
     """When it arrived (fleet clock)."""
 
 
+LINKS_LISTED = 4
+"""Up to this many links a warning lists one by one; more are counted by kind (a car of
+a loopback fleet has two per peer, and a list of thirty addresses says nothing)."""
+
+
+def links_said(links: list[tuple[str, str, bool]]) -> str:
+    """The session's links, (local, remote, reliable), as a warning tells them."""
+    if not links:
+        return "none"
+    said = [f"{dst}{'' if reliable else ' (best effort)'}" for _, dst, reliable in links]
+    if len(said) <= LINKS_LISTED:
+        return ", ".join(said)
+    kinds = Counter(f"{dst.split('/', 1)[0]}{'' if reliable else ' best effort'}" for _, dst, reliable in links)
+    return f"{len(links)} ({', '.join(f'{n} {kind}' for kind, n in sorted(kinds.items()))})"
+
+
 class FleetBus:
     """One process's Zenoh presence. A car (``car_id``) publishes under its own keys and
     answers clock queries; an observer (``car_id=None``: dashboard, recorder, operator)
@@ -402,8 +418,7 @@ class FleetBus:
 
     def _links_said(self) -> str:
         try:
-            return ", ".join(f"{dst}{'' if reliable else ' (best effort)'}" for _, dst, reliable in self.links()) \
-                or "none"
+            return links_said(self.links())
         except Exception as exc:  # noqa: BLE001 -- a closing session
             return f"unknown ({exc})"
 

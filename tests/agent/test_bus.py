@@ -15,7 +15,7 @@ from tests.conftest import wait_for
 from trustfg.agent import messages
 from trustfg.agent.config import BusConfig
 from trustfg.agent.gp import Plan
-from trustfg.fleet.bus import BEHIND_S, BusError, FleetBus, zenoh_config
+from trustfg.fleet.bus import BEHIND_S, LINKS_LISTED, BusError, FleetBus, links_said, zenoh_config
 from trustfg.fleet.keys import parse_key
 from trustfg.fleet.ports import free_port
 
@@ -524,3 +524,13 @@ def test_zenoh_receives_on_as_many_threads_as_the_bus_asks_unless_told_otherwise
     out = subprocess.run([sys.executable, "-c", probe], env=env, capture_output=True, text=True, timeout=60)
     assert out.returncode == 0, out.stderr
     assert int(out.stdout.strip().splitlines()[-1]) == (threads or RX_THREADS)
+
+
+def test_a_few_links_are_listed_and_many_are_counted_by_kind():
+    assert links_said([]) == "none"
+    two = [("tcp/127.0.0.1:1", "tcp/127.0.0.1:2", True), ("udp/127.0.0.1:3", "udp/127.0.0.1:4?rel=0", False)]
+    assert links_said(two) == "tcp/127.0.0.1:2, udp/127.0.0.1:4?rel=0 (best effort)"
+    many = [(f"tcp/127.0.0.1:{p}", f"tcp/127.0.0.1:{p + 1}", True) for p in range(0, 40, 2)] + \
+           [(f"udp/127.0.0.1:{p}", f"udp/127.0.0.1:{p + 1}?rel=0", False) for p in range(100, 120, 2)]
+    assert len(many) > LINKS_LISTED
+    assert links_said(many) == "30 (20 tcp, 10 udp best effort)"
