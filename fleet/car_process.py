@@ -350,7 +350,10 @@ class CarProcess:
                 self._publish_plan(bus, now, repeat=True)
             if now >= next_trust:
                 next_trust = max(next_trust + control.trust_report_period_s, now)
-                bus.publish("trust", messages.encode(self.agent.trust_message(now)))
+                # Stamped as it goes out, not at the pass's start: a replan earlier in
+                # the pass made ``now`` old, and peers read their estimate of our clock
+                # off these stamps (agent.clocks).
+                bus.publish("trust", messages.encode(self.agent.trust_message(self.clock())))
             if now >= next_pose:
                 next_pose = max(next_pose + control.pose_period_s, now)
                 self._publish_pose(bus, now)
