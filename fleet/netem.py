@@ -115,8 +115,8 @@ def _owner_alive(record: Path) -> bool:
 
 def sweep_stale() -> list[str]:
     """Remove the namespaces and bridges of labs whose maker is gone (a test run killed
-    before its labs' ``__exit__``); return their tags. Labs of live processes, and
-    namespaces that no record names, are left alone."""
+    before its labs' ``__exit__``); return the tags of those now gone. Labs of live
+    processes, and namespaces that no record names, are left alone."""
     if not OWNERS.is_dir():
         return []
     stale = [record for record in sorted(OWNERS.glob("*.owner")) if not _owner_alive(record)]
@@ -129,8 +129,9 @@ def sweep_stale() -> list[str]:
         tag = record.stem
         gone = [_remove_namespace(name) for name in namespaces if name.startswith(f"tfg{tag}c")]
         sh("ip", "link", "del", f"tfg{tag}br", check=False)
-        if all(gone):  # else the record stays, for the next sweep to try again
-            record.unlink(missing_ok=True)
+        if not all(gone):  # logged by _remove_namespace; the record stays for the next sweep
+            continue
+        record.unlink(missing_ok=True)
         log.warning("removed the network namespaces of lab %s, whose process is gone", tag)
         swept.append(tag)
     return swept

@@ -14,8 +14,8 @@ from trustfg.fleet.launch import DEFAULT_SCENES, default_scenario, loopback_flee
 def test_the_default_scene_is_the_smallest_shipped_one_with_enough_cars(cars):
     name = default_scenario(cars)
     assert len(load_scenario(name).cars) >= (cars or 1)
-    before = [size for scene, size in DEFAULT_SCENES[:[scene for scene, _ in DEFAULT_SCENES].index(name)]]
-    assert all(size < cars for size in before)  # no smaller default scene would have done
+    sizes = dict(DEFAULT_SCENES)
+    assert all(size < cars for size in sizes.values() if size < sizes[name])  # no smaller one would do
 
 
 def test_every_default_scene_has_the_cars_it_is_listed_with():
