@@ -3,7 +3,7 @@
 Each subcommand lives in its own module with a ``main(argv) -> int``; this module only
 dispatches (importing the one it runs), so ``trustfg car`` does not import the
 dashboard's web stack and the like. It sits above every layer. ``trustfg stop`` sets up
-logging itself, after its first E_STOPs are out (fleet.first_stop): this module imports
+logging itself, after its first E_STOPs are out (fleet.operator.estop_first): this module imports
 nothing before it.
 """
 
@@ -22,21 +22,21 @@ Set here, before any subcommand imports numpy; an OPENBLAS_NUM_THREADS set by th
 is kept."""
 
 COMMANDS = {
-    "sim": ("trustfg.fleet.launch", "the main job: a whole fleet as OS processes with mocap-sim"),
-    "car": ("trustfg.fleet.car_process", "one car's process: agent and bridge (lab or simulation)"),
+    "sim": ("trustfg.fleet.launch.launcher", "the main job: a whole fleet as OS processes with mocap-sim"),
+    "car": ("trustfg.fleet.car.process", "one car's process: agent and bridge (lab or simulation)"),
     "mocap-sim": ("trustfg.mocap_sim.sim", "simulated cars and OptiTrack (NatNet) for a fleet config"),
-    "faults": ("trustfg.fleet.faults", "the fault matrix: a fleet in network namespaces under each fault (root)"),
-    "go": ("trustfg.fleet.go", "the operator's session: start a trial, watch it, stop it (keys)"),
-    "stop": ("trustfg.fleet.stop", "emergency stop (or release, or abort) of the fleet or some cars"),
-    "check": ("trustfg.fleet.check", "bring-up check, motors held: poses, links, bus, clocks, what is missing"),
-    "router": ("trustfg.fleet.router", "a Zenoh router (no zenohd needed) for cars that talk through one"),
+    "faults": ("trustfg.fleet.faultlab.matrix", "the fault matrix: a fleet in network namespaces under each fault (root)"),
+    "go": ("trustfg.fleet.operator.go", "the operator's session: start a trial, watch it, stop it (keys)"),
+    "stop": ("trustfg.fleet.operator.estop", "emergency stop (or release, or abort) of the fleet or some cars"),
+    "check": ("trustfg.fleet.operator.check", "bring-up check, motors held: poses, links, bus, clocks, what is missing"),
+    "router": ("trustfg.fleet.bus.router", "a Zenoh router (no zenohd needed) for cars that talk through one"),
     "dashboard": ("trustfg.dashboard.server", "the live web page of a fleet, or a recorded run replayed"),
-    "record": ("trustfg.fleet.recording", "record a live fleet to an MCAP file"),
+    "record": ("trustfg.fleet.recording.mcap_file", "record a live fleet to an MCAP file"),
     "foxglove": ("trustfg.dashboard.foxglove_live", "serve the live fleet to Foxglove (WebSocket protocol)"),
     "report": ("trustfg.dashboard.report", "figures and an HTML report from a recorded run"),
-    "secure-config": ("trustfg.fleet.security", "Zenoh mutual-TLS and access-control config for one fleet member"),
-    "experiment": ("trustfg.fleet.experiments", "run the paper's experiments (and the scenario bank) in-process"),
-    "scenario": ("trustfg.fleet.scenes", "generate a scene from a seed, or check a scene's starts and goals"),
+    "secure-config": ("trustfg.fleet.bus.security", "Zenoh mutual-TLS and access-control config for one fleet member"),
+    "experiment": ("trustfg.fleet.experiments.paper", "run the paper's experiments (and the scenario bank) in-process"),
+    "scenario": ("trustfg.fleet.sim.scene_gen", "generate a scene from a seed, or check a scene's starts and goals"),
 }
 
 

@@ -36,7 +36,7 @@ from .config import AttackConfig
 from .gp import Plan
 from .messages import PeerTrust, TrustReport
 from .planner import PeerConstraint, PlanRequest
-from .track import Motion
+from .sightings import Motion
 
 HISTORY = 64
 """Own true plans kept for replay (at 5 Hz: 12.8 s)."""

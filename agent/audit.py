@@ -55,7 +55,7 @@ import numpy as np
 
 from .config import TrustConfig
 from .gp import Plan
-from .track import NEAREST_S, Track
+from .sightings import NEAREST_S, Track
 
 
 @dataclass

@@ -1,6 +1,6 @@
 """One car's agent: what it sees, what it is told, whom it trusts and what it plans.
 
-Pure logic, no I/O: the in-process simulation (fleet.fleet_sim) and the car process hand
+Pure logic, no I/O: the in-process simulation (fleet.sim.in_process) and the car process hand
 it observations and decoded messages and ask it for plans and reports at the times they
 choose. All times are seconds on the fleet clock.
 
@@ -103,7 +103,7 @@ from .guard import capped_below
 from .messages import PlanMessage, TrustReport
 from .planner import PeerConstraint, PlanningError, PlanRequest, PlanResult
 from .safe_plan import FALLBACK, FIRST, KEPT, RETRY, Outcome, plan_safely
-from .track import Track
+from .sightings import Track
 from .trust import CONSISTENCY, SAFETY, TrustBook, graded
 from .verify import Bounds, verify
 from .world import SignedDistanceField
@@ -281,7 +281,7 @@ class CarAgent:
 
     def _turns_first(self, motion, announced: np.ndarray) -> bool:
         """Does the peer seen in ``motion`` face so far from where the plan it announced goes
-        (``announced``: that plan's velocity now) that its tracker (bridge.tracking,
+        (``announced``: that plan's velocity now) that its tracker (bridge.trajectory_controller,
         TrackingConfig.turns_first) turns it on the spot before it drives? Every honest car
         does that after a stop or a start facing elsewhere, unannounced (the plans are a
         point's, the cars are not)."""

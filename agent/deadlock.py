@@ -286,7 +286,7 @@ class DeadlockWatch:
 
 
 def peers_seen(tracks: dict, views: dict, own_id: int, now: float, arrival_radius_m: float) -> dict[int, PeerSeen]:
-    """What the watch needs of every car we saw lately (``tracks``: agent.track.Track by
+    """What the watch needs of every car we saw lately (``tracks``: agent.sightings.Track by
     id), with what we heard from it (``views``: agent.evidence.PeerView by id)."""
     seen = {}
     for car_id, track in tracks.items():

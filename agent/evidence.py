@@ -42,7 +42,7 @@ from .clocks import ClockEstimate
 from .config import TrustConfig
 from .gp import Plan
 from .messages import PlanMessage
-from .track import Motion, Track
+from .sightings import Motion, Track
 from .trust import TRANSPARENCY
 
 Record = Callable[[int, float, float], None]
@@ -71,7 +71,7 @@ class PeerView:
     held: deque = field(default_factory=lambda: deque(maxlen=64))
     """Evidence ticks (t) at which, as we see the fleet, the peer could not drive its plan:
     its proximity guard held it below the speed the plan announced (agent.guard), or it
-    faced too far from where the plan went and turned on the spot first (bridge.tracking):
+    faced too far from where the plan went and turned on the spot first (bridge.trajectory_controller):
     then it is held only to going no faster than it said (agent.car_agent)."""
     lost: deque = field(default_factory=lambda: deque(maxlen=32))
     """(earliest, latest) stamp (our clock) a plan of the peer's that we lost could have

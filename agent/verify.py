@@ -28,7 +28,7 @@ costs decimetres). The follower starts at the speed the car has where the plan s
 standstill -- the soft start prior gives way where a hinge presses hard, as between
 cars queued closer than a stranger's epsilon -- is one the car cannot drive (held-out
 intersection-8: honest cars lurched and told futures that did not come true, and their
-peers distrusted them). Turning is the tracking controller's (bridge.tracking) business.
+peers distrusted them). Turning is the tracking controller's (bridge.trajectory_controller) business.
 
 How strict. ``tol`` (VerifyConfig.tolerance, 0.25) is the share of the margin that
 epsilon keeps beyond the breach distance that a plan may eat: eps - d is room for tracking

@@ -110,7 +110,7 @@ def obstacle_mask(world: WorldConfig) -> tuple[np.ndarray, tuple[float, float]]:
 def build_sdf(world: WorldConfig) -> SignedDistanceField:
     mask, origin = obstacle_mask(world)
     cell = world.resolution_m
-    from scipy import ndimage  # here: the command loop (fleet.command_loop) reads a field, never builds one
+    from scipy import ndimage  # here: the command loop (fleet.car.velocity_loop) reads a field, never builds one
 
     outside = ndimage.distance_transform_edt(~mask) * cell  # free cells: distance to obstacle
     inside = ndimage.distance_transform_edt(mask) * cell  # obstacle cells: distance to free

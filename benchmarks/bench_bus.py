@@ -7,7 +7,7 @@ Two OS processes on 127.0.0.1 (explicit TCP endpoints, multicast scouting off):
 * raw ping-pong: the sender puts the encoded bytes of a 41-state plan on a raw Zenoh
   key; the echo process puts them straight back from its callback. Round trip and
   one-way (time.monotonic is one clock for every process on a machine).
-* plan propagation: the sender publishes through trustfg.fleet.bus.FleetBus (the cached advanced
+* plan propagation: the sender publishes through trustfg.fleet.bus.session.FleetBus (the cached advanced
   publisher cars use); the peer drains its FleetBus queue, decodes and validates the
   message (agent.messages.Inbox) and notes the time. One way, publish to decoded.
 
@@ -28,8 +28,8 @@ import zenoh
 from trustfg.agent import messages
 from trustfg.agent.config import BusConfig
 from trustfg.agent.gp import Plan
-from trustfg.fleet.bus import FleetBus, zenoh_config
-from trustfg.fleet.ports import free_port
+from trustfg.fleet.bus.session import FleetBus, zenoh_config
+from trustfg.fleet.launch.ports import free_port
 
 FLEET = "bench"
 

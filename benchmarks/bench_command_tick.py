@@ -2,7 +2,7 @@
 
     python benchmarks/bench_command_tick.py [--cars 8] [--seconds 10] [--runs 3]
 
-One car's control step (fleet.command_loop: its own pose and the others' from a real
+One car's control step (fleet.car.velocity_loop: its own pose and the others' from a real
 NatNet client, tracking, the proximity guard against the other cars and the walls, the
 motion watch, one authenticated command datagram to a real car link) runs at
 ``control.command_rate_hz`` on absolute deadlines, as in the spawned loop, against
@@ -30,10 +30,10 @@ from trustfg.agent.scenario_files import load_scenario
 from trustfg.agent.world import build_sdf
 from trustfg.bridge import natnet
 from trustfg.bridge.carlink import SOURCE_CAR_PROCESS, CommandReceiver, CommandSender, link_key
-from trustfg.fleet.command_loop import REPORT_FIELDS, CommandLoop, Permit, connect_motive
-from trustfg.fleet.launch import default_scenario, loopback_fleet
-from trustfg.fleet.link_keys import with_link_keys
-from trustfg.fleet.ticker import ticks
+from trustfg.fleet.car.ticker import ticks
+from trustfg.fleet.car.velocity_loop import REPORT_FIELDS, CommandLoop, Permit, connect_motive
+from trustfg.fleet.launch.launcher import default_scenario, loopback_fleet
+from trustfg.fleet.launch.link_keys import with_link_keys
 from trustfg.mocap_sim.natnet_server import NatNetServer, NatNetServerOptions
 
 SPEED_MPS = 0.3

@@ -15,7 +15,7 @@ import tempfile
 from pathlib import Path
 
 from trustfg.agent.scenario_files import load_scenario
-from trustfg.fleet.launch import default_scenario, loopback_fleet, run
+from trustfg.fleet.launch.launcher import default_scenario, loopback_fleet, run
 
 
 def main() -> None:

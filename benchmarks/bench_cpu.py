@@ -4,7 +4,7 @@
 
 Runs ``trustfg sim`` (mocap-sim and one OS process per car on this machine, no dashboard)
 on each scene and reads every process's CPU from /proc (fleet.cpu: utime + stime of the
-process and all its threads, with its command loop: fleet.command_loop). Steady state is the window from the go (the
+process and all its threads, with its command loop: fleet.car.velocity_loop). Steady state is the window from the go (the
 start message's lead, ``sim.settle_s``, after it: every car plans against every peer from
 then on, including the ones still waiting to depart) to the first car's arrival (from then on the fleet thins out); a car's share of one
 core is its CPU time over that window divided by the window's wall time. Printed per
@@ -44,7 +44,7 @@ from pathlib import Path
 
 from trustfg.agent.scenario_files import load_scenario
 from trustfg.fleet.cpu import usable_cores
-from trustfg.fleet.launch import loopback_fleet, run
+from trustfg.fleet.launch.launcher import loopback_fleet, run
 
 
 def main() -> None:
@@ -84,7 +84,7 @@ def main() -> None:
 
 
 def yielding_except(focus: int | None):
-    """A process wrapper (fleet.launch.run's ``wrap``) that starts every car process but
+    """A process wrapper (fleet.launch.launcher.run's ``wrap``) that starts every car process but
     ``focus``'s at nice 19; None: all as they are."""
     def wrap(name: str, argv: list[str]) -> list[str]:
         if focus is not None and name.startswith("car ") and name != f"car {focus}":

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from trustfg.agent.scenario_files import load_scenario
-from trustfg.fleet.launch import default_scenario, free_port, loopback_fleet, run
+from trustfg.fleet.launch.launcher import default_scenario, free_port, loopback_fleet, run
 
 FLAGS = ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run", "--disable-background-networking",
          "--disable-component-update", "--disable-sync"]

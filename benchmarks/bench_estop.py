@@ -3,7 +3,7 @@
     python benchmarks/bench_estop.py [--stops 20] [--bus-stops 5] [--seed 0] [--out FILE]
 
 Runs ``trustfg sim --stay`` (mocap-sim, four car processes, the launcher) and joins its bus
-as the operator (fleet.operator.OperatorSession). Then, round after round: start a trial,
+as the operator (fleet.operator.session.OperatorSession). Then, round after round: start a trial,
 wait a random moment while the cars drive (U(1, 4) s after the departure, drawn from
 ``--seed``), run ``trustfg stop --config RUN/fleet.toml`` as a fresh process, as an operator
 types it, and measure from just before that process is started until every car that was
@@ -38,10 +38,10 @@ import numpy as np
 
 from trustfg.agent import messages
 from trustfg.agent.scenario_files import load_scenario
-from trustfg.fleet.bus import FleetBus
-from trustfg.fleet.operator import OperatorSession
-from trustfg.fleet.ports import free_port
-from trustfg.fleet.testbed import CommandLog
+from trustfg.fleet.bus.session import FleetBus
+from trustfg.fleet.launch.ports import free_port
+from trustfg.fleet.launch.testbed import CommandLog
+from trustfg.fleet.operator.session import OperatorSession
 
 HOLD_S = 1.0
 
@@ -64,7 +64,7 @@ class Operator:
     """The benchmark's operator on the run's bus (heartbeat, starts, releases)."""
 
     def __init__(self, fleet):
-        self.bus = FleetBus(fleet.bus, fleet.fleet, None, listen=(f"tcp/127.0.0.1:{free_port()}",),
+        self.bus = FleetBus(fleet.bus.session, fleet.fleet, None, listen=(f"tcp/127.0.0.1:{free_port()}",),
                             kinds=("status",), operator_kinds=())
         self.bus.open()
         self.session = OperatorSession(fleet, self.bus)

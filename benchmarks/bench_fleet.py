@@ -2,7 +2,7 @@
 
     python benchmarks/bench_fleet.py SCENE [SCENE ...] [--seeds 1]
 
-Runs the deterministic in-process fleet (fleet.fleet_sim: every car's agent, planner and
+Runs the deterministic in-process fleet (fleet.sim.in_process: every car's agent, planner and
 trust, message codec and inboxes, unicycles and tracking, in one process) on each scene
 to completion (every car at its goal) or the scene's timeout, and prints per run: cars,
 simulated time, wall time, speed (simulated seconds per wall second, and per CPU second of
@@ -23,8 +23,8 @@ import numpy as np
 
 from trustfg.agent.scenario_files import load_scenario
 from trustfg.agent.world import build_sdf
-from trustfg.fleet.fleet_sim import simulate
-from trustfg.fleet.runs import motion_summary
+from trustfg.fleet.sim.in_process import simulate
+from trustfg.fleet.sim.run_record import motion_summary
 
 
 def main() -> None:

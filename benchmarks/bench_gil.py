@@ -3,7 +3,7 @@
     python benchmarks/bench_gil.py [--peers 3 15] [--seconds 10]
 
 The car process runs its 50 Hz command loop in a thread beside the main thread's
-replanning (fleet.car_process). Python threads share one interpreter lock (the GIL):
+replanning (fleet.car.process). Python threads share one interpreter lock (the GIL):
 while the planner runs Python (our factors' callbacks, numpy calls) the interpreter may
 switch threads every ``sys.getswitchinterval()`` (the car process sets 1 ms), but while
 GTSAM's C++ (elimination, LM's bookkeeping) runs inside a call that does not release the
@@ -13,7 +13,7 @@ Here the main thread replans at 5 Hz exactly as a car does (warm replans of the
 intersection scene's car 1 against 3 or 15 peers, N = 41, a cold plan every 2 s), while
 (a) a probe thread sleeps 0.5 ms over and over, recording how much longer than that each
 sleep took (how long it waited for the interpreter once awake, plus the OS's scheduling),
-and (b) a 50 Hz ticker thread (fleet.ticker, as the command loop uses it) records how
+and (b) a 50 Hz ticker thread (fleet.car.ticker, as the command loop uses it) records how
 late each tick ran. Without the planner both stay well under a millisecond.
 """
 
@@ -30,7 +30,7 @@ import numpy as np
 from trustfg.agent.planner import plan_trajectory
 from trustfg.agent.scenario_files import load_scenario
 from trustfg.agent.world import build_sdf
-from trustfg.fleet.ticker import ticks
+from trustfg.fleet.car.ticker import ticks
 
 sys.path.insert(0, __file__.rsplit("/", 1)[0])
 from bench_planner import ego_request, peer_plans, queued  # noqa: E402

@@ -26,8 +26,8 @@ import tempfile
 from pathlib import Path
 
 from trustfg.agent.scenario_files import load_scenario
-from trustfg.fleet.launch import loopback_fleet, run
-from trustfg.fleet.stats import least_pair_clearance
+from trustfg.fleet.experiments.stats import least_pair_clearance
+from trustfg.fleet.launch.launcher import loopback_fleet, run
 
 SCENES = ["circle-8", "circle-obstacles-8", "warehouse-8"]
 

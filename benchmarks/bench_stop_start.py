@@ -23,7 +23,7 @@ import time
 from pathlib import Path
 
 from trustfg.agent.scenario_files import load_scenario
-from trustfg.fleet.testbed import links_to_sinks
+from trustfg.fleet.launch.testbed import links_to_sinks
 
 
 def first_datagrams(command: list[str], sinks: list[socket.socket]) -> list[float]:

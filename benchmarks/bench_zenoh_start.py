@@ -7,11 +7,11 @@ Bare Zenoh sessions, no trustfg code on the wire: each start opens ``--peers`` p
 sessions in their own OS processes on loopback (a TCP and a UDP ``?rel=0`` endpoint each,
 multicast scouting off), every peer dialling every other (``--dial lower``: only the higher
 id dials). Each subscribes to every peer's ``plan`` (an advanced subscriber with history and
-recovery, as fleet.bus does) and ``status`` (plain), and for ``--seconds`` publishes a
+recovery, as fleet.bus.session does) and ``status`` (plain), and for ``--seconds`` publishes a
 plan-sized sample on both plan paths and a status every 0.1 s. A start is *lost* when some
 peer heard nothing of some kind of some other peer in the last second.
 
-``--watch behind`` adds fleet.bus's rule (``fleet.bus.silent_kinds``: a kind silent for
+``--watch behind`` adds fleet.bus.session's rule (``fleet.bus.session.silent_kinds``: a kind silent for
 SILENT_S from a live peer, or a plan BEHIND_S behind the peer's status, is subscribed
 again, at most every RESUBSCRIBE_EVERY_S); ``--watch silent`` the rule without the second
 part, as it was before stop 31. Each start reports the longest a peer's plans went
@@ -20,10 +20,10 @@ is mended. Load the cores (e.g. two busy loops) to see losses more often: on 2 c
 under load, Zenoh 1.10.2 lost a subscription in 4 of 76 starts dialling all, 1 of 76
 dialling lower; with a watch (silence of 1 s there), 0 of 19.
 
-Each peer also declares a liveliness token (``<prefix>/<id>/alive``, as fleet.bus does)
+Each peer also declares a liveliness token (``<prefix>/<id>/alive``, as fleet.bus.session does)
 and a liveliness subscriber with history: a token *missed* is one some peer never saw by
 the end, though it hears that peer's samples. ``--tcp-only`` leaves out the UDP endpoints
-(stop 28: two fleet.bus sessions with both endpoints missed a token in about 0.9 % of
+(stop 28: two fleet.bus.session sessions with both endpoints missed a token in about 0.9 % of
 starts, with TCP alone in none of 400; a token declared again did not repair it).
 """
 
@@ -38,8 +38,8 @@ import time
 import zenoh
 import zenoh.ext as zext
 
-from trustfg.fleet.bus import FREQUENT, RESUBSCRIBE_EVERY_S, silent_kinds
-from trustfg.fleet.ports import free_port
+from trustfg.fleet.bus.session import FREQUENT, RESUBSCRIBE_EVERY_S, silent_kinds
+from trustfg.fleet.launch.ports import free_port
 
 KINDS = ("plan", "status")
 
@@ -127,7 +127,7 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=6.0)
     parser.add_argument("--dial", choices=("all", "lower"), default="all")
     parser.add_argument("--watch", choices=("silent", "behind"), default=None,
-                        help="subscribe again to a kind gone silent: fleet.bus's rule ('behind'), or without "
+                        help="subscribe again to a kind gone silent: fleet.bus.session's rule ('behind'), or without "
                              "its plans-behind part ('silent')")
     parser.add_argument("--tcp-only", action="store_true", help="no UDP endpoints: one TCP link per pair")
     args = parser.parse_args()

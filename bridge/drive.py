@@ -1,12 +1,12 @@
 """One control tick of a car: the plan and the pose in, a velocity command out.
 
-The car process (fleet.car_process, at ``control.command_rate_hz`` on real time) and the
-in-process fleet (fleet.fleet_sim, on simulated time) both command their cars through
+The car process (fleet.car.process, at ``control.command_rate_hz`` on real time) and the
+in-process fleet (fleet.sim.in_process, on simulated time) both command their cars through
 :func:`drive`, so the experiments measure the pipeline that drives the cars:
 
 1. STOP when the car may not drive (no start yet, before its departure, arrived), has
    no plan, or does not see itself;
-2. else the tracking command for the plan (bridge.tracking);
+2. else the tracking command for the plan (bridge.trajectory_controller);
 3. capped, when ``guard.enabled``, by the proximity guard (agent.guard) against the
    other cars it sees and the map's walls ahead of it. A car the guard holds (a cap
    under HELD_MPS) stands and turns on the spot to where its plan goes. Kanayama's turn
@@ -25,11 +25,11 @@ from ..agent.config import Scenario
 from ..agent.gp import Plan
 from ..agent.guard import speed_cap
 from ..agent.world import SignedDistanceField
-from .tracking import STANDSTILL_MPS, track, turn_on_the_spot
+from .trajectory_controller import STANDSTILL_MPS, track, turn_on_the_spot
 
 HELD_MPS = STANDSTILL_MPS
 """A guard cap below this holds the car: it stands and turns on the spot to where its plan
-goes (bridge.tracking.turn_on_the_spot), not with the plan's curvature it cannot follow."""
+goes (bridge.trajectory_controller.turn_on_the_spot), not with the plan's curvature it cannot follow."""
 
 
 @dataclass(frozen=True)

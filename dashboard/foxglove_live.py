@@ -2,7 +2,7 @@
 
 Joins the bus as an observer and serves what it hears with Foxglove's SDK
 (``foxglove.start_server``, subprotocol ``foxglove.websocket.v1``): every fleet message as
-JSON on its key expression, and the scene Foxglove's 3D panel draws (fleet.foxglove_scene:
+JSON on its key expression, and the scene Foxglove's 3D panel draws (fleet.recording.foxglove_scene:
 the map, the cars, their plans, goals and epsilon circles, frame transforms, a log). In
 Foxglove: *Open connection* -> *Foxglove WebSocket* -> ``ws://HOST:PORT``. The map is sent
 again every few seconds for clients that connect late.
@@ -21,10 +21,10 @@ import foxglove
 from ..agent import messages
 from ..agent.config import Scenario
 from ..agent.scenario_files import load_scenario
-from ..fleet.bus import FleetBus
-from ..fleet.command import command_parser, configured, stop_on_signals
-from ..fleet.foxglove_scene import FoxgloveLog
-from ..fleet.recording import schema
+from ..fleet.bus.session import FleetBus
+from ..fleet.program import command_parser, configured, stop_on_signals
+from ..fleet.recording.foxglove_scene import FoxgloveLog
+from ..fleet.recording.mcap_file import schema
 
 MAP_PERIOD_S = 2.0
 

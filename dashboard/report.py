@@ -19,10 +19,10 @@ import numpy as np
 
 from ..agent import metrics
 from ..agent.world import build_sdf
-from ..fleet import figures
-from ..fleet.command import command_parser
-from ..fleet.recording import read_recording, resolve_run
-from ..fleet.runs import RunRecord, arrivals, motion_summary, rounded
+from ..fleet.experiments import figures
+from ..fleet.program import command_parser
+from ..fleet.recording.mcap_file import read_recording, resolve_run
+from ..fleet.sim.run_record import RunRecord, arrivals, motion_summary, rounded
 
 TRUST_SAMPLE_S = 0.1
 

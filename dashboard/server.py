@@ -4,7 +4,7 @@
     trustfg dashboard --replay RUN  [--host H] [--port P]
 
 A Starlette (ASGI) app served by uvicorn. Live, it joins the fleet's Zenoh bus as an
-observer; replaying, it plays an MCAP recording (trustfg.fleet.recording) at real time, with
+observer; replaying, it plays an MCAP recording (trustfg.fleet.recording.mcap_file) at real time, with
 play, pause, speed and a time slider. Either way the messages feed one
 :class:`dashboard.state.FleetView`, and every connected page gets a snapshot over a
 WebSocket 10 times a second. The page (dashboard/static) is plain HTML, SVG and
@@ -41,11 +41,11 @@ from starlette.websockets import WebSocket, WebSocketDisconnect
 from ..agent import messages
 from ..agent.config import ConfigError, Scenario
 from ..agent.scenario_files import load_scenario
-from ..fleet.bus import FleetBus
-from ..fleet.command import command_parser
-from ..fleet.operator import OperatorSession
-from ..fleet.recording import Recorded, read_recording, resolve_run
-from .operator import OperatorPanel, check_operator_mode, load_token
+from ..fleet.bus.session import FleetBus
+from ..fleet.operator.session import OperatorSession
+from ..fleet.program import command_parser
+from ..fleet.recording.mcap_file import Recorded, read_recording, resolve_run
+from .estop_panel import OperatorPanel, check_operator_mode, load_token
 from .state import FleetView
 
 log = logging.getLogger(__name__)

@@ -13,7 +13,7 @@ Parsing is pure (:func:`parse_stat_ticks`), reading is a thin wrapper around it.
 Inside a car process: :class:`Sections` books its main thread's CPU time to the section of
 the loop it was spent in, and :func:`snapshot` / :func:`breakdown` turn two moments of
 that and of the kernel's per-thread counts (the process's and its command loop's) into
-where the car's CPU went between them (fleet.car_process: while the car drives).
+where the car's CPU went between them (fleet.car.process: while the car drives).
 :func:`machine_load` says whether a run's processes saturated the cores it may use.
 """
 
@@ -47,7 +47,7 @@ def parse_stat_ticks(text: str) -> int:
 def read_ticks(pid: int, children: bool = False) -> int | None:
     """utime + stime of a process in clock ticks; None if it is gone or unreadable.
     ``children``: with its live descendants' (a car process and its command loop,
-    fleet.command_loop: what one car costs)."""
+    fleet.car.velocity_loop: what one car costs)."""
     ticks = _stat_ticks(f"/proc/{pid}/stat")
     if ticks is None:
         return None
@@ -189,7 +189,7 @@ class Tally:
 @dataclass(frozen=True)
 class Snapshot:
     """One moment of a car's CPU: its main loop's sections and the kernel's per-thread counts
-    of the car process and of its command loop (fleet.command_loop)."""
+    of the car process and of its command loop (fleet.car.velocity_loop)."""
 
     t: float
     """Wall time, seconds (monotonic)."""

@@ -52,8 +52,8 @@ from ..agent.scenario_files import load_scenario
 from ..agent.vehicle import VehicleState, step
 from ..bridge import natnet
 from ..bridge.carlink import CommandReceiver, link_key
-from ..fleet.command import command_parser, configured, stop_on_signals
-from ..fleet.ticker import ticks
+from ..fleet.car.ticker import ticks
+from ..fleet.program import command_parser, configured, stop_on_signals
 from .natnet_server import NatNetServer, NatNetServerOptions, Occlusion
 
 log = logging.getLogger(__name__)

@@ -17,7 +17,7 @@ import pytest
 
 from trustfg.agent.scenario_files import load_scenario
 from trustfg.agent.world import build_sdf
-from trustfg.fleet.ports import free_port
+from trustfg.fleet.launch.ports import free_port
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENARIOS = ROOT / "deploy" / "scenarios"
@@ -102,8 +102,8 @@ def pytest_xdist_make_scheduler(config, log):
 def pytest_sessionstart(session):
     """Before any test (in the controller, or a run without xdist): the network namespaces
     of fault labs whose test run was killed go, so that they do not fail this run's
-    leftover check (fleet.netem.sweep_stale: labs of live processes stay)."""
-    from trustfg.fleet import netem
+    leftover check (fleet.faultlab.netem.sweep_stale: labs of live processes stay)."""
+    from trustfg.fleet.faultlab import netem
 
     if getattr(session.config, "workerinput", None) is None and netem.available() is None:
         for tag in netem.sweep_stale():

@@ -54,11 +54,11 @@ def test_the_check_sees_a_leftover_process_and_port():
 
 def test_the_check_sees_a_leftover_command_loop_by_its_name():
     """A car process's command loop is spawned by multiprocessing (its command line says
-    nothing of trustfg); it names itself (fleet.command_loop.name_process)."""
+    nothing of trustfg); it names itself (fleet.car.velocity_loop.name_process)."""
     import subprocess
     import sys
 
-    probe = subprocess.Popen([sys.executable, "-c", "import time\nfrom trustfg.fleet.command_loop import name_process\n"
+    probe = subprocess.Popen([sys.executable, "-c", "import time\nfrom trustfg.fleet.car.velocity_loop import name_process\n"
                               "name_process('trustfg-cmd-9')\ntime.sleep(60)"])
     try:
         assert wait_for(lambda: any(line.startswith(f"{probe.pid}: trustfg-cmd-9") for line in trustfg_processes()), 10.0)

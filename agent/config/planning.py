@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from .checks import ConfigError, positive
 
 TRACK_HISTORY_S = 2.0
-"""How long a car keeps its observations of every car (agent.track.Track.history_s)."""
+"""How long a car keeps its observations of every car (agent.sightings.Track.history_s)."""
 
 
 @dataclass(frozen=True)

@@ -30,7 +30,7 @@ class VehicleConfig:
 
 @dataclass(frozen=True)
 class TrackingConfig:
-    """Gains of the unicycle trajectory-tracking controller (bridge.tracking)."""
+    """Gains of the unicycle trajectory-tracking controller (bridge.trajectory_controller)."""
 
     k_along: float = 1.5
     """1/s, gain on the along-track error."""
@@ -48,7 +48,7 @@ class TrackingConfig:
 
     def turns_first(self, heading_error_rad: float) -> bool:
         """Does a car this far (wrapped to [-pi, pi]) from its plan's direction turn on the
-        spot before it drives? The tracker's rule (bridge.tracking), and what its peers
+        spot before it drives? The tracker's rule (bridge.trajectory_controller), and what its peers
         expect of it."""
         return abs(heading_error_rad) > math.radians(self.turn_first_deg)
 
@@ -122,7 +122,7 @@ class ControlConfig:
     """Pause between attempts to reach Motive or to open the bus while a car process starts
     (it keeps its car stopped meanwhile)."""
     lease_s: float = 1.0
-    """The command loop (fleet.command_loop, a process of its own) drives the car only on a
+    """The command loop (fleet.car.velocity_loop, a process of its own) drives the car only on a
     permit from the car process younger than this: an agent that hangs or dies stops its
     car within it. Longer than a replan on a loaded machine (the main loop renews the
     permit between replans)."""
@@ -162,7 +162,7 @@ class OperatorConfig:
     """How long a car process's datagrams carry RELEASE after the operator released it
     (while it waits), and the operator's tools send their own RELEASE straight to a
     version-2 link (a car latches per sender), seconds: longer than an operator's e-stop repeats on the link (0.5 s,
-    fleet.link_stop), so a repeat still in flight cannot latch the car again, and enough
+    fleet.operator.estop_direct), so a repeat still in flight cannot latch the car again, and enough
     datagrams (40 at 50 Hz) that losing some does not matter."""
     clock_tolerance_s: float = 0.02
     """``trustfg check`` warns when a car computer's clock is further than this from the
@@ -190,7 +190,7 @@ class BusConfig:
     (deploy/zenoh/) used as the base -- TLS, access control -- that the fields here
     complete: endpoints are added to the file's; mode and multicast scouting come from the
     file when it sets them, and a value here that contradicts the file is an error
-    (fleet.bus.zenoh_config). Without multicast scouting a session opens at once (no
+    (fleet.bus.session.zenoh_config). Without multicast scouting a session opens at once (no
     scouting delay).
     """
 

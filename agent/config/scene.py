@@ -165,7 +165,7 @@ class SafetyConfig:
 
 @dataclass(frozen=True)
 class SimConfig:
-    """Both simulations: the in-process fleet (fleet.fleet_sim, which steps physics and
+    """Both simulations: the in-process fleet (fleet.sim.in_process, which steps physics and
     control at ``control.command_rate_hz``) and the departures ``trustfg sim`` draws."""
 
     observation_noise_m: float = 0.002

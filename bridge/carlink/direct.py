@@ -1,7 +1,7 @@
 """One E_STOP datagram straight to a car's link, with the standard library alone.
 
 ``trustfg stop`` sends its first E_STOPs through :func:`send_e_stop` before anything else
-of the program loads (fleet.first_stop); every later datagram goes through a
+of the program loads (fleet.operator.estop_first); every later datagram goes through a
 :class:`~.link.CommandSender`, which resolves its address with :func:`resolve` too. The
 bytes come from :func:`.frame.command_datagram`, the one encoder of every command.
 """

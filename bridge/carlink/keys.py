@@ -3,7 +3,7 @@
 A key is 32 random bytes, written as 64 hexadecimal digits (whitespace ignored) in a key
 file of its own (``cars[].link_key_file``; readable by its owner only, never committed) or,
 for throw-away runs, inline (``cars[].link_key``). The car's firmware holds the same bytes.
-``trustfg sim`` makes fresh keys for every run (fleet.link_keys).
+``trustfg sim`` makes fresh keys for every run (fleet.launch.link_keys).
 
     python3 -c "import secrets; print(secrets.token_hex(32))" > car1.key && chmod 600 car1.key
 """
@@ -22,7 +22,7 @@ if TYPE_CHECKING:
 
 
 def _config_error(message: str) -> Exception:
-    # the typed config loads lazily: trustfg stop reads keys before it (fleet.link_stop)
+    # the typed config loads lazily: trustfg stop reads keys before it (fleet.operator.estop_direct)
     from ...agent.config import ConfigError
 
     return ConfigError(message)
@@ -49,7 +49,7 @@ def link_key(car: "CarConfig") -> bytes | None:
 
 def key_for(car_id: int, link_version: int, link_key_file: str, link_key: str) -> bytes | None:
     """:func:`link_key` from a car's fields as a config file gives them (``trustfg stop``
-    reads them before the typed config loads: fleet.first_stop)."""
+    reads them before the typed config loads: fleet.operator.estop_first)."""
     where = f"cars[id={car_id}]"
     if link_version == 1:
         return None

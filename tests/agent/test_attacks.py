@@ -9,7 +9,7 @@ from trustfg.agent.config.attacks import AttackConfig
 from trustfg.agent.gp import Plan
 from trustfg.agent.messages import PeerTrust, TrustReport
 from trustfg.agent.planner import PeerConstraint, PlanRequest
-from trustfg.agent.track import Motion
+from trustfg.agent.sightings import Motion
 
 NOW = 10.0
 

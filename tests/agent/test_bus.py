@@ -15,9 +15,9 @@ from tests.conftest import wait_for
 from trustfg.agent import messages
 from trustfg.agent.config import BusConfig
 from trustfg.agent.gp import Plan
-from trustfg.fleet.bus import BEHIND_S, LINKS_LISTED, BusError, FleetBus, links_said, zenoh_config
-from trustfg.fleet.keys import parse_key
-from trustfg.fleet.ports import free_port
+from trustfg.fleet.bus.key_exprs import parse_key
+from trustfg.fleet.bus.session import BEHIND_S, LINKS_LISTED, BusError, FleetBus, links_said, zenoh_config
+from trustfg.fleet.launch.ports import free_port
 
 FLEET = "t"
 
@@ -63,7 +63,7 @@ def test_with_a_udp_endpoint_peers_get_a_best_effort_link_and_plans_arrive():
     with FleetBus(BusConfig(listen=(a, a_udp)), FLEET, 1) as one, \
             FleetBus(BusConfig(listen=(endpoint(), udp_endpoint()), connect=(a, a_udp)), FLEET, 2) as two:
         # Not their liveliness tokens: Zenoh 1.10 loses one between peers with UDP links in
-        # about 1 % of starts (fleet.bus.present; CI met it here once). The links and the
+        # about 1 % of starts (fleet.bus.session.present; CI met it here once). The links and the
         # plans are what this test is about.
         assert wait_for(lambda: {reliable for *_, reliable in two.links()} == {True, False}, 10.0), two.links()
         assert any(src.startswith("udp/") and not reliable for src, _, reliable in two.links())
@@ -98,8 +98,8 @@ def test_a_start_the_car_missed_is_recovered_at_the_operators_next_heartbeat():
     import zenoh
     import zenoh.ext as zext
 
-    from trustfg.fleet.bus import zenoh_config
-    from trustfg.fleet.keys import fleet_key
+    from trustfg.fleet.bus.key_exprs import fleet_key
+    from trustfg.fleet.bus.session import zenoh_config
 
     a = endpoint()
     with FleetBus(BusConfig(listen=(a,)), FLEET, 1) as car:
@@ -228,7 +228,7 @@ def test_a_listen_endpoint_on_port_0_is_refused():
 
 
 def test_silent_kinds_are_those_a_live_car_is_not_heard_on():
-    from trustfg.fleet.bus import SILENT_S, silent_kinds
+    from trustfg.fleet.bus.session import SILENT_S, silent_kinds
     kinds = ("plan", "pose")
     now, opened = 100.0, 0.0
     heard = {(1, "pose"): now - 0.1, (1, "plan"): now - SILENT_S - 0.1,  # plans lost
@@ -248,7 +248,7 @@ def test_a_frequent_kind_behind_the_cars_other_kinds_is_declared_again_sooner():
     """Plans (ten a second) a second behind the car's trust reports are a lost
     subscription, not loss: declared again without waiting SILENT_S. Trust reports (two
     a second) wait for SILENT_S; a car only starting has no plan to send yet."""
-    from trustfg.fleet.bus import BEHIND_S, silent_kinds
+    from trustfg.fleet.bus.session import BEHIND_S, silent_kinds
     kinds = ("plan", "trust")
     now, opened = 100.0, 98.0  # within SILENT_S of the opening
     alive = {1: True, 2: True, 3: True, 4: True}
@@ -265,7 +265,7 @@ def test_a_frequent_kind_behind_the_cars_other_kinds_is_declared_again_sooner():
 
 
 def test_a_car_whose_token_never_came_is_on_the_bus_while_it_is_heard():
-    from trustfg.fleet.bus import SILENT_S, present
+    from trustfg.fleet.bus.session import SILENT_S, present
     now = 100.0
     tokens = {1: True, 2: False}
     heard = {(1, "plan"): now - 0.1, (2, "plan"): now - 0.1,  # 2 left: late samples do not bring it back
@@ -284,7 +284,7 @@ def test_a_car_heard_without_a_token_is_on_the_bus_and_watched(monkeypatch):
     it on the bus while it hears it, and watches its subscriptions as for any live car."""
     import zenoh
 
-    import trustfg.fleet.bus as bus_module
+    import trustfg.fleet.bus.session as bus_module
     monkeypatch.setattr(bus_module, "SILENT_S", 1.0)
     monkeypatch.setattr(bus_module, "RESUBSCRIBE_EVERY_S", 1.0)
     a = endpoint()
@@ -320,7 +320,7 @@ def test_the_operator_counts_a_car_heard_without_a_token_as_on_the_bus():
     import zenoh
 
     from trustfg.agent.scenario_files import load_scenario
-    from trustfg.fleet.operator import OperatorSession
+    from trustfg.fleet.operator.session import OperatorSession
     a = endpoint()
     with FleetBus(BusConfig(listen=(a,)), FLEET, None) as observer:
         session = OperatorSession(load_scenario("circle-4"), observer, direct=False)
@@ -348,7 +348,7 @@ def status_of(car: int) -> bytes:
 def two_cars_watched(monkeypatch, silent_s: float):
     """Cars 1 and 2 on real sessions, each up to the other, with the watch's silence at
     ``silent_s`` and a redeclaration at most every second."""
-    import trustfg.fleet.bus as bus_module
+    import trustfg.fleet.bus.session as bus_module
     monkeypatch.setattr(bus_module, "SILENT_S", silent_s)
     monkeypatch.setattr(bus_module, "RESUBSCRIBE_EVERY_S", 1.0)
     a = endpoint()
@@ -415,7 +415,7 @@ def test_a_restarted_car_is_not_taken_for_lost_plans_before_it_could_send_one(mo
     """Car 2's process goes (its token down) and a new one comes: its first trust reports
     against the old process's last plan are no plans a second behind -- the new process
     has sent none yet. Fails with the behind rule counting from the old process."""
-    import trustfg.fleet.bus as bus_module
+    import trustfg.fleet.bus.session as bus_module
     monkeypatch.setattr(bus_module, "SILENT_S", math.inf)  # the behind rule alone
     a = endpoint()
     with FleetBus(BusConfig(listen=(a,)), FLEET, 1, kinds=("plan", "trust")) as one:
@@ -460,7 +460,7 @@ def test_a_live_car_heard_on_nothing_has_every_kind_declared_again(monkeypatch):
 def test_a_process_that_hears_no_car_for_a_while_says_so_and_how_long(monkeypatch, caplog):
     """A deaf spell: car 2's token is up, nothing of it arrives for longer than DEAF_S.
     Counted and told when it starts and when it ends, with its length."""
-    import trustfg.fleet.bus as bus_module
+    import trustfg.fleet.bus.session as bus_module
     monkeypatch.setattr(bus_module, "DEAF_S", 0.6)
     with two_cars_watched(monkeypatch, math.inf) as (one, two), contextlib.ExitStack() as stack:
         one_endpoint = one.config.listen[0]
@@ -497,7 +497,7 @@ def test_a_process_that_hears_no_car_for_a_while_says_so_and_how_long(monkeypatc
 RX_THREADS_PROBE = """
 import os, time
 from trustfg.agent.config import BusConfig
-from trustfg.fleet.bus import FleetBus
+from trustfg.fleet.bus.session import FleetBus
 a, b = "tcp/127.0.0.1:{a}", "tcp/127.0.0.1:{b}"
 with FleetBus(BusConfig(listen=(a,)), "t", 1) as one, FleetBus(BusConfig(listen=(b,), connect=(a,)), "t", 2) as two:
     deadline = time.monotonic() + 10
@@ -516,7 +516,7 @@ def test_zenoh_receives_on_as_many_threads_as_the_bus_asks_unless_told_otherwise
     import subprocess
     import sys
 
-    from trustfg.fleet.bus import RX_THREADS
+    from trustfg.fleet.bus.session import RX_THREADS
     env = {k: v for k, v in os.environ.items() if k != "ZENOH_RUNTIME"}
     if preset is not None:
         env["ZENOH_RUNTIME"] = preset

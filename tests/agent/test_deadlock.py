@@ -12,7 +12,7 @@ from trustfg.agent.evidence import PeerView
 from trustfg.agent.gp import standing
 from trustfg.agent.messages import PlanMessage
 from trustfg.agent.routes import connected
-from trustfg.agent.track import Track
+from trustfg.agent.sightings import Track
 from trustfg.agent.world import build_sdf
 
 CONFIG = DeadlockConfig()

@@ -10,8 +10,8 @@ import os
 import numpy as np
 import pytest
 
-from trustfg.fleet.experiments import detection_delay, run_experiment, summarise
-from trustfg.fleet.fleet_sim import simulate
+from trustfg.fleet.experiments.paper import detection_delay, run_experiment, summarise
+from trustfg.fleet.sim.in_process import simulate
 
 SEEDS = list(range(100, 108))
 JOBS = min(2, os.cpu_count() or 1)
@@ -86,7 +86,7 @@ def test_liars_are_found_out_and_slander_sinks_no_one():
     """A few attacks, trust on, in the lab's left turns (seeds of their own): every liar
     that tells a lie the audit can check is detected within 3 s of it, and a slanderer
     costs no honest car its trust."""
-    from trustfg.fleet.adversaries import run_matrix
+    from trustfg.fleet.experiments.adversaries import run_matrix
     results = run_matrix(["lab"], ["displaced", "false-future", "collude", "slander"], ["on"],
                          [300, 301], JOBS, label="test")["lab"]
     for attack, by_variant in results.items():
@@ -129,7 +129,7 @@ def test_a_car_with_a_skewed_clock_stays_trusted_under_loss_and_delay(lab):
 
 
 def test_the_fair_off_keeps_eps_0_from_every_peer_where_trust_starts_wider(intersection):
-    from trustfg.fleet.experiments import EXPERIMENTS
+    from trustfg.fleet.experiments.paper import EXPERIMENTS
 
     short = dataclasses.replace(intersection, sim=dataclasses.replace(intersection.sim, timeout_s=3.0))
     eps_0 = intersection.safety.epsilon_0(0.1, 0.1)

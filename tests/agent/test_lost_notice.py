@@ -10,7 +10,7 @@ from trustfg.agent.config import TrustConfig
 from trustfg.agent.evidence import PeerView, audit, take_plan
 from trustfg.agent.gp import Plan
 from trustfg.agent.messages import PlanMessage
-from trustfg.agent.track import Track
+from trustfg.agent.sightings import Track
 
 CONFIG = TrustConfig()
 PERIOD = 0.2  # the fleet's replan period

@@ -1,4 +1,4 @@
-"""The car's side of the operator's protocol (agent.operation): trials, e-stop, deadman."""
+"""The car's side of the operator's protocol (agent.operator_state): trials, e-stop, deadman."""
 
 import math
 
@@ -6,7 +6,7 @@ import pytest
 
 from trustfg.agent.config import OperatorConfig
 from trustfg.agent.messages import StartMessage, StopMessage
-from trustfg.agent.operation import LATCH_REPORT_GRACE_S, Mode, Operation
+from trustfg.agent.operator_state import LATCH_REPORT_GRACE_S, Mode, Operation
 
 CAR = 2
 

@@ -1,7 +1,7 @@
 import threading
 import time
 
-from trustfg.fleet.ticker import ticks
+from trustfg.fleet.car.ticker import ticks
 
 
 def test_ticks_keep_absolute_deadlines_and_stop_at_once():

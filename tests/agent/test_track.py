@@ -1,11 +1,11 @@
-"""agent.track: observations kept in one array, checked against the plain definition."""
+"""agent.sightings: observations kept in one array, checked against the plain definition."""
 
 import math
 
 import numpy as np
 import pytest
 
-from trustfg.agent.track import MAX_SAMPLES, NEAREST_S, Track
+from trustfg.agent.sightings import MAX_SAMPLES, NEAREST_S, Track
 
 
 def reference(samples: list[tuple], times: np.ndarray, window_s: float):

@@ -5,7 +5,7 @@ import pytest
 from trustfg.agent.config import TrackingConfig, VehicleConfig
 from trustfg.agent.gp import Plan
 from trustfg.agent.vehicle import VehicleState, step
-from trustfg.bridge.tracking import track
+from trustfg.bridge.trajectory_controller import track
 
 
 def circle_plan(radius=1.0, speed=0.4, seconds=12.0, n=61):

@@ -17,10 +17,10 @@ import pytest
 from tests.conftest import ROOT, wait_for
 from trustfg.agent import messages
 from trustfg.dashboard.server import replay_to_end
-from trustfg.fleet.bus import FleetBus
-from trustfg.fleet.launch import loopback_fleet, run
-from trustfg.fleet.ports import free_port
-from trustfg.fleet.recording import read_recording
+from trustfg.fleet.bus.session import FleetBus
+from trustfg.fleet.launch.launcher import loopback_fleet, run
+from trustfg.fleet.launch.ports import free_port
+from trustfg.fleet.recording.mcap_file import read_recording
 
 ARTIFACTS = ROOT / "test-artifacts"
 HEARD_FOR_S = 1.0  # the page is compared with what the test heard over at least this long
@@ -39,7 +39,7 @@ class Published:
     """What the cars publish, as the test itself hears it on the bus."""
 
     def __init__(self, fleet):
-        self.bus = FleetBus(fleet.bus, fleet.fleet, None, listen=(f"tcp/127.0.0.1:{free_port()}",))
+        self.bus = FleetBus(fleet.bus.session, fleet.fleet, None, listen=(f"tcp/127.0.0.1:{free_port()}",))
         self.inbox = messages.Inbox()
         self.poses = defaultdict(lambda: deque(maxlen=100))
         self.trust = defaultdict(lambda: deque(maxlen=20))

@@ -11,8 +11,8 @@ import pytest
 
 from tests.conftest import wait_for
 from tests.dashboard.test_browser import ARTIFACTS, CHROMIUM_FLAGS, chromium, page_up
-from trustfg.fleet.ports import free_port
-from trustfg.fleet.testbed import LoopbackFleet
+from trustfg.fleet.launch.ports import free_port
+from trustfg.fleet.launch.testbed import LoopbackFleet
 
 TOKEN = "operator-token-made-by-the-test"
 

@@ -23,9 +23,9 @@ from trustfg.agent import messages
 from trustfg.agent.config import BusConfig
 from trustfg.agent.gp import Plan
 from trustfg.dashboard.foxglove_live import FoxgloveLive
-from trustfg.fleet.bus import FleetBus
-from trustfg.fleet.ports import free_port
-from trustfg.fleet.recording import McapRecorder, read_recording
+from trustfg.fleet.bus.session import FleetBus
+from trustfg.fleet.launch.ports import free_port
+from trustfg.fleet.recording.mcap_file import McapRecorder, read_recording
 
 T0 = 1_700_000_000.0
 

@@ -10,9 +10,9 @@ import time
 from trustfg.agent import messages
 from trustfg.agent.config import BusConfig
 from trustfg.agent.scenario_files import dump_scenario
-from trustfg.fleet.bus import FleetBus
-from trustfg.fleet.ports import free_port
-from trustfg.fleet.recording import read_recording
+from trustfg.fleet.bus.session import FleetBus
+from trustfg.fleet.launch.ports import free_port
+from trustfg.fleet.recording.mcap_file import read_recording
 
 
 def pose(seq: int) -> bytes:

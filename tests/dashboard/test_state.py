@@ -75,7 +75,7 @@ def test_cars_without_a_colour_take_the_palette_in_order(intersection):
 def test_a_car_whose_clock_is_off_is_shown_and_alerted(intersection):
     """Each peer's status carries its estimate of car 2's clock; the page shows the median
     and alerts past CLOCK_ALERT_S; a car a few ms off is not alerted."""
-    from trustfg.fleet.car_report import clock_counters
+    from trustfg.fleet.car.report import clock_counters
     view = FleetView(intersection)
     for reporter, seen in ((1, {2: 0.31, 3: -0.002}), (3, {2: 0.29}), (4, {2: 0.30, 3: 0.003})):
         view.update(messages.StatusMessage(reporter, 1, 1.0, "driving", 5.0, 1, False, clock_counters(seen)), 1.0)

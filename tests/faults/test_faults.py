@@ -10,8 +10,8 @@ import sys
 
 import pytest
 
-from trustfg.fleet import netem
-from trustfg.fleet.faults import CASES
+from trustfg.fleet.faultlab import netem
+from trustfg.fleet.faultlab.matrix import CASES
 
 pytestmark = [pytest.mark.faults,
               pytest.mark.skipif(netem.available() is not None, reason=str(netem.available()))]
@@ -45,7 +45,7 @@ def run_as_a_lab_does(name: str, out) -> dict:
     a lab runs it: what its Zenoh sessions hold goes with it. (Run in the test's own
     process, a TCP listener was left open after `link-cut-entry` until the suite's end, in
     one of five two-worker runs: most likely the run's observer session, whose close Zenoh
-    gives up on after 10 s when a peer stops reading -- fleet.bus counts that,
+    gives up on after 10 s when a peer stops reading -- fleet.bus.session counts that,
     ``observer_close`` in the row.)"""
     command = [sys.executable, "-m", "trustfg", "faults", "--cases", name, "--seeds", "1", "--out", str(out)]
     process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)

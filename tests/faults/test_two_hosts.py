@@ -12,10 +12,10 @@ import sys
 
 import pytest
 
-from trustfg.fleet import netem
-from trustfg.fleet.launch import loopback_fleet, run
-from trustfg.fleet.ports import free_port
-from trustfg.fleet.router import through_router
+from trustfg.fleet.bus.router import through_router
+from trustfg.fleet.faultlab import netem
+from trustfg.fleet.launch.launcher import loopback_fleet, run
+from trustfg.fleet.launch.ports import free_port
 
 pytestmark = [pytest.mark.faults,
               pytest.mark.skipif(netem.available() is not None, reason=str(netem.available()))]

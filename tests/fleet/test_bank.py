@@ -11,9 +11,9 @@ from trustfg.agent.config import ConfigError
 from trustfg.agent.scenario_files import load_scenario
 from trustfg.agent.trust import TrustBook
 from trustfg.agent.world import build_sdf
-from trustfg.fleet.bank import METHODS, judge, parse_settings, scene_data, variant
-from trustfg.fleet.bank_report import bootstrap_ci, seeds_per_scene
-from trustfg.fleet.runs import RunRecord
+from trustfg.fleet.experiments.bank.report import bootstrap_ci, seeds_per_scene
+from trustfg.fleet.experiments.bank.runner import METHODS, judge, parse_settings, scene_data, variant
+from trustfg.fleet.sim.run_record import RunRecord
 
 
 def test_the_baselines_are_config_changes_of_the_same_scene():

@@ -1,4 +1,4 @@
-"""Reporting journals of several commits side by side (fleet.bank_journals)."""
+"""Reporting journals of several commits side by side (fleet.experiments.bank.journals)."""
 
 import json
 import subprocess
@@ -7,7 +7,7 @@ import sys
 import pytest
 
 from trustfg.agent.config import ConfigError
-from trustfg.fleet.bank_journals import gather, parse_take, read_journal
+from trustfg.fleet.experiments.bank.journals import gather, parse_take, read_journal
 
 
 def _run(scene, method, seed, outcome="success", clearance=0.2, group="bank", code="abc1234"):

@@ -2,7 +2,8 @@
 
 import json
 
-from trustfg.fleet import bank_recheck, environment
+from trustfg.fleet.experiments import run_environment
+from trustfg.fleet.experiments.bank import recheck as bank_recheck
 
 ENTRY = {"scene": "corridor-4", "method": "full", "seed": 3, "outcome": "success", "arrived": 4, "makespan_s": 26.18,
          "flowtime_s": 68.18, "least_clearance_m": 0.2199, "obstacle_min_clearance_m": 0.234, "breaches": [],
@@ -34,12 +35,12 @@ def test_the_runs_to_recheck_are_drawn_the_same_way_each_time():
 
 def test_an_environment_names_the_packages_and_the_kernels_a_run_goes_through(monkeypatch):
     monkeypatch.delenv("NUMBA_CPU_NAME", raising=False)
-    env = environment.environment()
+    env = run_environment.environment()
     assert env["packages"]["numpy"] and env["packages"]["gtsam"] and env["python"]
     assert env["numba_cpu"] and isinstance(env["numpy_dispatch"], list)
     json.dumps(env)  # goes into bank.json as it is
-    here = environment.digest(env)
-    assert len(here) == 12 and here == environment.digest(environment.environment())
+    here = run_environment.digest(env)
+    assert len(here) == 12 and here == run_environment.digest(run_environment.environment())
     monkeypatch.setenv("NUMBA_CPU_NAME", "generic")  # compiled for another CPU: another environment
-    assert environment.environment()["variables"]["NUMBA_CPU_NAME"] == "generic"
-    assert environment.digest(environment.environment()) != here
+    assert run_environment.environment()["variables"]["NUMBA_CPU_NAME"] == "generic"
+    assert run_environment.digest(run_environment.environment()) != here

@@ -1,4 +1,4 @@
-"""A car process's poses from NatNet (fleet.car_process): each is observed at the moment it
+"""A car process's poses from NatNet (fleet.car.process): each is observed at the moment it
 arrived, not at the pass of the main loop that takes it (the client is pulled: frames wait
 in the socket until the loop comes round)."""
 
@@ -7,9 +7,9 @@ import time
 import pytest
 
 from trustfg.bridge.natnet import Frame, RigidBody
-from trustfg.fleet.car_process import CarProcess
-from trustfg.fleet.launch import loopback_fleet
-from trustfg.fleet.link_keys import with_link_keys
+from trustfg.fleet.car.process import CarProcess
+from trustfg.fleet.launch.launcher import loopback_fleet
+from trustfg.fleet.launch.link_keys import with_link_keys
 
 
 def test_a_frame_is_observed_at_its_arrival_on_the_fleet_clock(intersection, tmp_path):

@@ -1,9 +1,9 @@
-"""What a car process says it waits for (fleet.car_report), in one line."""
+"""What a car process says it waits for (fleet.car.report), in one line."""
 
 import logging
 
-from trustfg.agent.operation import Mode
-from trustfg.fleet.car_report import WaitingLog, waiting_for
+from trustfg.agent.operator_state import Mode
+from trustfg.fleet.car.report import WaitingLog, waiting_for
 
 
 def test_what_a_starting_car_waits_for():

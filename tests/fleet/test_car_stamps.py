@@ -1,4 +1,4 @@
-"""A car process's trust reports carry the time they go out (fleet.car_process): peers
+"""A car process's trust reports carry the time they go out (fleet.car.process): peers
 estimate our clock from these stamps (agent.clocks), and a long replan earlier in the same
 pass of the main loop must not age them. Before, on two starved cores, peers put 13 of the
 16 cars of a fleet half a second behind (the estimate's clamp), all on one clock."""
@@ -6,10 +6,10 @@ pass of the main loop must not age them. Before, on two starved cores, peers put
 import threading
 
 from trustfg.agent import messages
-from trustfg.fleet.bus import FleetBus
-from trustfg.fleet.car_process import CarProcess
-from trustfg.fleet.launch import loopback_fleet
-from trustfg.fleet.link_keys import with_link_keys
+from trustfg.fleet.bus.session import FleetBus
+from trustfg.fleet.car.process import CarProcess
+from trustfg.fleet.launch.launcher import loopback_fleet
+from trustfg.fleet.launch.link_keys import with_link_keys
 
 REPLAN_S = 0.8
 """How long each replan takes on the car's clock: a starved machine's."""
@@ -29,7 +29,7 @@ def test_a_trust_report_is_stamped_when_it_is_sent_not_when_its_pass_began(inter
             process.stop.set()
 
     process._replan = slow_replan
-    bus = FleetBus(fleet.bus, fleet.fleet, car.id, listen=car.listen, clock=process.clock)
+    bus = FleetBus(fleet.bus.session, fleet.fleet, car.id, listen=car.listen, clock=process.clock)
     bus.open()
     sent = bus.publish
 

@@ -1,13 +1,13 @@
-"""A car process across trials (fleet.car_process): each start plans anew and keeps what
+"""A car process across trials (fleet.car.process): each start plans anew and keeps what
 the car knew of its peers."""
 
 import pytest
 
 from trustfg.agent import messages
 from trustfg.agent.trust import TRANSPARENCY
-from trustfg.fleet.car_process import CarProcess
-from trustfg.fleet.launch import loopback_fleet
-from trustfg.fleet.link_keys import with_link_keys
+from trustfg.fleet.car.process import CarProcess
+from trustfg.fleet.launch.launcher import loopback_fleet
+from trustfg.fleet.launch.link_keys import with_link_keys
 
 
 def test_a_new_trial_plans_anew_and_keeps_what_the_car_knew_of_its_peers(intersection, tmp_path):

@@ -1,4 +1,4 @@
-"""The command loop in a process of its own (fleet.command_loop): the lease rule, and the
+"""The command loop in a process of its own (fleet.car.velocity_loop): the lease rule, and the
 spawned loop against a real NatNet server and a real car link (the authenticated link,
 version 2, with a key made for the test)."""
 
@@ -15,10 +15,10 @@ from trustfg.agent.gp import Plan
 from trustfg.agent.world import build_sdf
 from trustfg.bridge import natnet
 from trustfg.bridge.carlink import CommandReceiver, link_key
-from trustfg.fleet.command_loop import Permit, allowed
-from trustfg.fleet.command_process import CommandProcess
-from trustfg.fleet.launch import loopback_fleet
-from trustfg.fleet.link_keys import with_link_keys
+from trustfg.fleet.car.velocity_handle import CommandProcess
+from trustfg.fleet.car.velocity_loop import Permit, allowed
+from trustfg.fleet.launch.launcher import loopback_fleet
+from trustfg.fleet.launch.link_keys import with_link_keys
 from trustfg.mocap_sim.natnet_server import NatNetServer, NatNetServerOptions
 
 LEASE_S = 0.3

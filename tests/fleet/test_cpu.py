@@ -63,7 +63,7 @@ def test_the_meter_sees_cpu_burnt_and_not_time_slept():
 
 
 def test_a_process_read_with_its_children_counts_what_they_burn():
-    """A car process is read with its command loop (fleet.command_loop): a child that
+    """A car process is read with its command loop (fleet.car.velocity_loop): a child that
     burns 0.3 s of CPU shows in its parent's tree, not in the parent alone."""
     import subprocess
     import sys

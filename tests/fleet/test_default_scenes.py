@@ -7,7 +7,7 @@ import pytest
 
 from trustfg.agent.config import ConfigError
 from trustfg.agent.scenario_files import load_scenario
-from trustfg.fleet.launch import DEFAULT_SCENES, default_scenario, loopback_fleet
+from trustfg.fleet.launch.launcher import DEFAULT_SCENES, default_scenario, loopback_fleet
 
 
 @pytest.mark.parametrize("cars", [None, 1, 4, 5, 8, 9, 16])

@@ -8,12 +8,12 @@ import sys
 
 from trustfg.agent.scenario_files import dump_scenario
 from trustfg.bridge.carlink import SOURCE_OPERATOR, decode_command, decode_command_v2, link_key
-from trustfg.fleet.link_keys import with_link_keys
-from trustfg.fleet.testbed import links_to_sinks
+from trustfg.fleet.launch.link_keys import with_link_keys
+from trustfg.fleet.launch.testbed import links_to_sinks
 
 
 def test_the_first_e_stop_reads_links_from_the_file_and_reaches_only_the_named_cars(intersection, tmp_path):
-    from trustfg.fleet.first_stop import first_e_stop
+    from trustfg.fleet.operator.estop_first import first_e_stop
 
     sinks = [socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in intersection.cars]
     try:
@@ -62,7 +62,7 @@ print(json.dumps({"status": status, "sent": sent}))
 
 
 def test_trustfg_stop_sends_its_first_e_stops_before_the_typed_config_and_logging_load(intersection, tmp_path):
-    """The cli's fast path (fleet.first_stop): remove it, or set up logging first, and the
+    """The cli's fast path (fleet.operator.estop_first): remove it, or set up logging first, and the
     first datagram leaves after those imports."""
     config, sinks = links_to_sinks(intersection, tmp_path)
     try:

@@ -12,8 +12,8 @@ import pytest
 
 from trustfg.agent.config import SimConfig
 from trustfg.agent.scenario_files import load_scenario
-from trustfg.fleet.experiments import run_one
-from trustfg.fleet.fleet_sim import Network, simulate
+from trustfg.fleet.experiments.paper import run_one
+from trustfg.fleet.sim.in_process import Network, simulate
 
 SCENES = Path(__file__).resolve().parent.parent / "data" / "scenes"
 

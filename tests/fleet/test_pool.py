@@ -9,7 +9,7 @@ import time
 
 import pytest
 
-from trustfg.fleet.pool import parallel
+from trustfg.fleet.experiments.workers import parallel
 
 
 def _square(task: int) -> int:
@@ -44,7 +44,7 @@ def test_ctrl_c_or_sigterm_stops_the_runs_under_way_and_leaves_no_worker(tmp_pat
     script.write_text(textwrap.dedent("""
         import signal, sys, time
         signal.signal(signal.SIGINT, signal.default_int_handler)  # a terminal's (a background job ignores it)
-        from trustfg.fleet.pool import parallel
+        from trustfg.fleet.experiments.workers import parallel
         try:
             for _ in parallel(time.sleep, [3600, 3600, 3600], 2):
                 pass

@@ -2,7 +2,7 @@
 
 import socket
 
-from trustfg.fleet import ports
+from trustfg.fleet.launch import ports
 
 
 def test_handed_ports_are_outside_the_ephemeral_range_and_never_repeat():

@@ -6,8 +6,8 @@ import subprocess
 import sys
 import time
 
-from trustfg.fleet import processes
-from trustfg.fleet.processes import Processes, grace_s
+from trustfg.fleet.launch import processes
+from trustfg.fleet.launch.processes import Processes, grace_s
 
 
 def test_children_stopped_together_get_more_time_the_more_they_are():

@@ -12,8 +12,8 @@ from trustfg.agent.config import CarConfig, ConfigError, Scenario, WorldConfig
 from trustfg.agent.routes import segment_clear
 from trustfg.agent.scenario_files import dump_scenario, load_scenario, read_source
 from trustfg.agent.world import build_sdf
-from trustfg.fleet.bank import BANK
-from trustfg.fleet.scenes import KINDS, check_scene, cut_off_by_parked, generate, scene_file_text, scene_problem
+from trustfg.fleet.experiments.bank.runner import BANK
+from trustfg.fleet.sim.scene_gen import KINDS, check_scene, cut_off_by_parked, generate, scene_file_text, scene_problem
 
 SIZES = {"circle": 8, "circle-obstacles": 8, "corridor": 4, "bottleneck": 4, "t-junction": 6, "warehouse": 8,
          "random-field": 6}

@@ -1,6 +1,6 @@
 """The experiments' statistics over runs."""
 
-from trustfg.fleet import stats
+from trustfg.fleet.experiments import stats
 
 
 def test_the_least_pair_clearance_leaves_out_each_car_with_itself():

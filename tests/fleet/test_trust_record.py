@@ -6,7 +6,7 @@ import json
 import numpy as np
 
 from trustfg.agent.config import AttackConfig
-from trustfg.fleet.trust_record import lies_due
+from trustfg.fleet.sim.trust_record import lies_due
 
 
 def _scenario(lab, liar):

@@ -16,10 +16,10 @@ from trustfg.agent import messages
 from trustfg.agent.scenario_files import dump_scenario
 from trustfg.bridge import natnet
 from trustfg.bridge.carlink import CommandReceiver, link_key, new_key
-from trustfg.fleet.bus import FleetBus
-from trustfg.fleet.launch import loopback_fleet
-from trustfg.fleet.link_keys import with_link_keys
-from trustfg.fleet.ports import free_port
+from trustfg.fleet.bus.session import FleetBus
+from trustfg.fleet.launch.launcher import loopback_fleet
+from trustfg.fleet.launch.link_keys import with_link_keys
+from trustfg.fleet.launch.ports import free_port
 from trustfg.mocap_sim.natnet_server import NatNetServer, NatNetServerOptions
 
 
@@ -50,7 +50,7 @@ def test_car_process_stops_without_pose_drives_after_start_and_stops_on_sigterm(
     observer = f"tcp/127.0.0.1:{free_port()}"
     with NatNetServer(options, served(car, lambda: tracked["on"])), \
             CommandReceiver(car.id, (host, int(port)), key=link_key(car)) as link, \
-            FleetBus(fleet.bus, fleet.fleet, None, listen=(observer,)) as bus:
+            FleetBus(fleet.bus.session, fleet.fleet, None, listen=(observer,)) as bus:
         process = subprocess.Popen([sys.executable, "-m", "trustfg", "car", "--id", str(car.id), "--config",
                                     str(path), "--stats", str(stats)], stderr=subprocess.PIPE, text=True)
         try:
@@ -127,7 +127,7 @@ def alive(pid: int) -> bool:
 
 
 def test_a_frozen_car_process_stops_its_car_and_a_killed_one_leaves_it_stopped(one_car, tmp_path):
-    """The layer under the agent (fleet.command_loop): with the car process frozen
+    """The layer under the agent (fleet.car.velocity_loop): with the car process frozen
     (SIGSTOP: a hung agent) its command loop stops the car once the lease runs out, and
     drives on when the agent comes back; with the car process killed (SIGKILL) the loop
     stops the car and exits."""
@@ -139,7 +139,7 @@ def test_a_frozen_car_process_stops_its_car_and_a_killed_one_leaves_it_stopped(o
     observer = f"tcp/127.0.0.1:{free_port()}"
     with NatNetServer(options, served(car, lambda: True)), \
             CommandReceiver(car.id, (host, int(port)), key=link_key(car)) as link, \
-            FleetBus(fleet.bus, fleet.fleet, None, listen=(observer,)) as bus:
+            FleetBus(fleet.bus.session, fleet.fleet, None, listen=(observer,)) as bus:
         process = subprocess.Popen([sys.executable, "-m", "trustfg", "car", "--id", str(car.id), "--config",
                                     str(path)], stderr=subprocess.DEVNULL)
         loop = None

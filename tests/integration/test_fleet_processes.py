@@ -8,7 +8,7 @@ import pytest
 
 from trustfg.agent.config import AttackConfig
 from trustfg.agent.scenario_files import load_scenario
-from trustfg.fleet.launch import loopback_fleet, run
+from trustfg.fleet.launch.launcher import loopback_fleet, run
 
 SCENES = Path(__file__).resolve().parent.parent / "data" / "scenes"
 
@@ -83,7 +83,7 @@ def test_a_skewed_clock_is_seen_and_forgiven(honest):
 def test_honest_cars_distrust_a_liar_over_the_network(liar):
     """Every honest car trusts the liar 0.2 less than every honest peer within 3 s of its
     lie going on (from the trust reports heard), and still less at the end. From a lie
-    that goes on (fleet.trust_record.LIE_SUSTAINED_S), not from the liar's departure or
+    that goes on (fleet.sim.trust_record.LIE_SUSTAINED_S), not from the liar's departure or
     its first lie: a liar standing still -- here, now and then, in a deadlock just after
     it sets off -- has no motion to bend and tells no lie (measured: 1 run in 10 stood
     from 1.9 to 6 s, its first lie due at 6.15 s, detected at 8.52 s), and one whose plan

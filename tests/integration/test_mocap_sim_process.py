@@ -15,9 +15,9 @@ from trustfg.agent.scenario_files import dump_scenario
 from trustfg.bridge import natnet
 from trustfg.bridge.carlink import CommandSender
 from trustfg.bridge.natnet_client import NatNetClient, NatNetClientOptions
-from trustfg.fleet.launch import loopback_fleet
-from trustfg.fleet.link_keys import with_link_keys
-from trustfg.fleet.ticker import ticks
+from trustfg.fleet.car.ticker import ticks
+from trustfg.fleet.launch.launcher import loopback_fleet
+from trustfg.fleet.launch.link_keys import with_link_keys
 
 
 @pytest.fixture

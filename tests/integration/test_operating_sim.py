@@ -10,8 +10,8 @@ import sys
 import time
 
 from tests.conftest import wait_for
-from trustfg.fleet.ports import free_port
-from trustfg.fleet.testbed import CommandLog
+from trustfg.fleet.launch.ports import free_port
+from trustfg.fleet.launch.testbed import CommandLog
 
 
 def trustfg(*argv):

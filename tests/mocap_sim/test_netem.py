@@ -8,7 +8,7 @@ import time
 
 import pytest
 
-from trustfg.fleet.netem import DatagramRelay, DelayRelay, Lab, available
+from trustfg.fleet.faultlab.netem import DatagramRelay, DelayRelay, Lab, available
 
 
 @pytest.fixture
@@ -123,9 +123,9 @@ def test_a_killed_runs_lab_is_swept_and_a_live_one_is_not():
     import subprocess
     import sys
 
-    from trustfg.fleet import netem
+    from trustfg.fleet.faultlab import netem
 
-    script = ("import sys, time\nfrom trustfg.fleet.netem import Lab\nlab = Lab([1, 2]).__enter__()\n"
+    script = ("import sys, time\nfrom trustfg.fleet.faultlab.netem import Lab\nlab = Lab([1, 2]).__enter__()\n"
               "print(lab.tag, flush=True)\ntime.sleep(60)\n")
     child = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True)
     try:
@@ -154,7 +154,7 @@ def test_a_killed_runs_lab_is_swept_and_a_live_one_is_not():
 
 
 def test_an_unreadable_owner_record_counts_as_stale(tmp_path, monkeypatch):
-    from trustfg.fleet import netem
+    from trustfg.fleet.faultlab import netem
 
     monkeypatch.setattr(netem, "OWNERS", tmp_path)
     (tmp_path / "abcd.owner").write_text("{not json")

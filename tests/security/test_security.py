@@ -13,9 +13,9 @@ import zenoh
 from tests.conftest import ROOT, wait_for
 from trustfg.agent import messages
 from trustfg.agent.config import BusConfig
-from trustfg.fleet.bus import FleetBus, zenoh_config
-from trustfg.fleet.ports import free_port
-from trustfg.fleet.security import secure_config
+from trustfg.fleet.bus.security import secure_config
+from trustfg.fleet.bus.session import FleetBus, zenoh_config
+from trustfg.fleet.launch.ports import free_port
 
 FLEET = "sec"
 CARS = [1, 2]

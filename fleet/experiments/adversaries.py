@@ -1,0 +1,180 @@
+"""``trustfg experiment adversaries``: every attack against three fleets, over many seeds.
+
+    trustfg experiment adversaries [--seeds 50] [--seed 0] [--scenes lab intersection]
+                                   [--attacks NAME ...] [--variants on off wide]
+                                   [--held-out intersection-8 --held-out-seeds 20]
+                                   [--jobs J] [--out DIR]
+
+Per scene, attack (car 1 lies; ``collude``: cars 1 and 3) and seed, the in-process fleet
+runs three ways (and the honest fleet under loss, delay and a skewed clock with trust on,
+``honest-lossy-clock``: what trust costs honest cars):
+
+    on     trust on: every factor, plan rejection, the audit, epsilon from trust
+    off    the paper's baseline: trust gathered but not used, every plan believed, eps_0
+    wide   a uniformly careful fleet: every plan believed, every peer at eps_0 * g_max
+
+and each cell (scene, attack, variant) is summarised by fleet.experiments.stats.cell with 95 %
+bootstrap intervals: honest-liar breaches, least clearance, detection time, false
+positives, makespan. Held-out scenes (not looked at while the defences were built) run
+``on`` only and are reported apart. Writes DIR/adversaries/metrics.json and table.md.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+from ...agent.config import AttackConfig, Scenario
+from ...agent.scenario_files import load_scenario
+from ..program import command_parser, configured
+from . import stats
+from .paper import (
+    Progress,
+    run_one,
+    study_folder,
+    study_options,
+    trust_off,
+    trust_on,
+    uniform_wide,
+    with_attack,
+    write_study,
+)
+from .workers import parallel
+
+LIAR = 1
+PARTNER = 3
+
+ATTACKS: dict[str, dict[int, AttackConfig]] = {
+    "displaced": {LIAR: AttackConfig("displaced")},
+    "forged-future": {LIAR: AttackConfig("forged-stamp", {"shift_s": 0.2})},
+    "forged-past": {LIAR: AttackConfig("forged-stamp", {"shift_s": -0.2})},
+    "bias": {LIAR: AttackConfig("bias")},
+    "false-future": {LIAR: AttackConfig("false-future")},
+    "false-yield": {LIAR: AttackConfig("false-yield")},
+    "on-off": {LIAR: AttackConfig("on-off")},
+    "replay": {LIAR: AttackConfig("replay")},
+    "false-testimony": {LIAR: AttackConfig("false-testimony")},
+    "slander": {LIAR: AttackConfig("slander")},
+    "praise": {LIAR: AttackConfig("praise")},
+    "framing": {LIAR: AttackConfig("framing")},
+    "collude": {LIAR: AttackConfig("collude"), PARTNER: AttackConfig("collude")},
+}
+"""The attacks of the table, by label: which car runs which attack (config.attacks)."""
+
+SKEWED_CAR = 2
+
+
+def lossy_clock(scenario: Scenario) -> Scenario:
+    """No liar; 30 % of messages lost, 50 +- 20 ms delay, car 2's clock 0.3 s ahead."""
+    sim = dataclasses.replace(scenario.sim, message_loss=0.3, message_latency_s=0.03, message_jitter_s=0.04)
+    cars = tuple(dataclasses.replace(c, clock_offset_s=0.3) if c.id == SKEWED_CAR else c for c in scenario.cars)
+    return dataclasses.replace(scenario, sim=sim, cars=cars)
+
+
+HONEST = {"honest-lossy-clock": lossy_clock}
+"""Honest fleets under faults (trust on only): what trust costs honest cars."""
+
+PLAN_LIES = ("displaced", "forged-future", "forged-past", "false-future", "false-yield", "on-off", "replay",
+             "collude")
+"""Attacks whose false claims exceed the transparency tolerance somewhere in the plan (the
+acceptance's "detected within 3 s"); the others are bounded otherwise (README)."""
+
+
+VARIANTS = {"on": trust_on, "off": trust_off, "wide": uniform_wide}
+
+
+def run_summary(task: tuple) -> dict:
+    """One seed of one fleet, summarised (a RUN dict; the record is dropped to save memory);
+    ``task`` ends with the scenario and the seed (what comes before labels it)."""
+    *_, scenario, seed = task
+    run, _ = run_one(scenario, seed)
+    return run
+
+
+def run_matrix(scenes: list[str], attacks: list[str], variants: list[str], seeds: list[int], jobs: int,
+               label: str = "adversaries") -> dict:
+    """{scene: {attack: {variant: [RUN, ...]}}} over every combination."""
+    tasks = []
+    for scene in scenes:
+        base = load_scenario(scene)
+        for attack in attacks:
+            honest = attack in HONEST
+            attacked = HONEST[attack](base) if honest else with_attack(base, ATTACKS[attack])
+            for variant in (["on"] if honest else variants):
+                made = VARIANTS[variant](attacked)
+                tasks.extend((scene, attack, variant, made, seed) for seed in seeds)
+    results: dict = {}
+    progress = Progress(label, len(tasks))
+    for (scene, attack, variant, _, seed), run in parallel(run_summary, tasks, jobs):
+        results.setdefault(scene, {}).setdefault(attack, {}).setdefault(variant, []).append(run)
+        progress.step(f"{scene} {attack} {variant} seed {seed}: least clearance "
+                      f"{run.get('liar_min_clearance', stats.least_pair_clearance(run)):.3f} m")
+    progress.done()
+    return results
+
+
+def summarise(results: dict) -> dict:
+    return {scene: {attack: {variant: stats.cell(runs) for variant, runs in by_variant.items()}
+                    for attack, by_variant in by_attack.items()}
+            for scene, by_attack in results.items()}
+
+
+def table(summary: dict, title: str) -> str:
+    """A markdown table: one row per scene, attack and variant."""
+    rows = []
+    for scene, by_attack in summary.items():
+        for attack, by_variant in by_attack.items():
+            for variant, c in by_variant.items():
+                stuck = c["runs"] - c["all_arrived"]
+                makespan = stats.show(c["makespan_s"], 1) + (f" ({stuck} not all arrived)" if stuck else "")
+                if "breach_rate" not in c:  # an honest fleet: any breach, no detection
+                    rows.append([scene, attack, variant, f"{c['breach_seeds_any']}/{c['runs']} (any pair)",
+                                 f"{c['min_clearance_m']:.3f}", "-", "-", "-",
+                                 stats.show(c["false_positive_rate"], 0, True), makespan])
+                    continue
+                never = f" ({c['never_detected']} never)" if c["never_detected"] else ""
+                rows.append([scene, attack, variant,
+                             f"{c['breach_seeds']}/{c['runs']} ({stats.show(c['breach_rate'], 0, True)})",
+                             f"{c['min_clearance_m']:.3f}", stats.show(c["detected_3s_rate"], 0, True)
+                             + (f" ({c['withdrawn']} withdrawn)" if c.get("withdrawn") else ""),
+                             stats.show(c.get("detected_3s_told_rate"), 0, True), stats.show(c["detection_s"], 1) + never,
+                             stats.show(c["false_positive_rate"], 0, True), makespan])
+    return stats.markdown(title, ["scene", "attack", "fleet", "honest-liar breaches (seeds)", "least clearance (m)",
+                                  "detected within 3 s of the first lie due",
+                                  "... of the first lie told", "detection (s), median", "false positives",
+                                  "makespan (s), median"], rows)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = command_parser("trustfg experiment adversaries", __doc__)
+    study_options(parser, seeds=50)
+    parser.add_argument("--scenes", nargs="+", default=["lab", "intersection"], help="scenes (default: lab intersection)")
+    parser.add_argument("--attacks", nargs="+", choices=[*ATTACKS, *HONEST], default=[*ATTACKS, *HONEST],
+                        metavar="ATTACK", help=f"attacks (default: all: {', '.join([*ATTACKS, *HONEST])})")
+    parser.add_argument("--variants", nargs="+", choices=list(VARIANTS), default=list(VARIANTS),
+                        help="fleets (default: on off wide)")
+    parser.add_argument("--held-out", nargs="*", default=["intersection-8"],
+                        help="scenes run with trust on only and reported apart (default: intersection-8)")
+    parser.add_argument("--held-out-seeds", type=int, default=20, help="seeds per held-out cell (default 20)")
+    args = parser.parse_args(argv)
+    if args.seeds < 1 or args.held_out_seeds < 1:
+        parser.error("--seeds and --held-out-seeds must be at least 1")
+    for scene in args.scenes + args.held_out:
+        configured("trustfg experiment adversaries", lambda: load_scenario(scene))
+    out = study_folder(args.out, "adversaries")
+    started = time.perf_counter()
+    seeds = list(range(args.seed, args.seed + args.seeds))
+    results = run_matrix(args.scenes, args.attacks, args.variants, seeds, args.jobs)
+    held = list(range(args.seed, args.seed + args.held_out_seeds))
+    held_results = run_matrix(args.held_out, args.attacks, ["on"], held, args.jobs, "held-out") if args.held_out else {}
+    report = {"experiment": "adversaries", "seeds": seeds, "held_out_seeds": held, "liar": LIAR, "partner": PARTNER,
+              "attacks": {a: {str(car): dataclasses.asdict(c) for car, c in ATTACKS[a].items()}
+                          for a in args.attacks if a in ATTACKS},
+              "summary": summarise(results), "held_out": summarise(held_results),
+              "runs": results, "held_out_runs": held_results,
+              "wall_time_s": round(time.perf_counter() - started, 1)}
+    text = table(report["summary"], f"{len(seeds)} seeds per cell")
+    if held_results:
+        text += "\n" + table(report["held_out"], f"held out: trust on, {len(held)} seeds per cell")
+    write_study(out, report, text)
+    return 0

@@ -1,0 +1,55 @@
+"""Independent runs in worker processes, stopped at once by Ctrl-C.
+
+The experiments and the bank run many in-process runs, each a pure function of its task.
+``parallel(fn, tasks, jobs)`` yields (task, fn(task)) in task order (or as each finishes,
+``ordered=False``) from ``jobs`` worker processes -- in this process when ``jobs`` <= 1,
+easier to debug and profile. The workers ignore SIGINT, so Ctrl-C in a terminal reaches
+this process alone; it terminates the workers at once (the runs under way are lost, the
+finished ones are the caller's) and raises KeyboardInterrupt. With a process pool that
+waits for its queue on exit, Ctrl-C used to leave a long bank running to its end.
+SIGTERM (``kill``, a job scheduler's stop) unwinds the same way while the workers run:
+it killed this process alone, and each worker, finishing its run, died on a broken pipe
+with a traceback.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import signal
+import threading
+from collections.abc import Callable, Iterable, Iterator
+from typing import TypeVar
+
+from ...agent.planner import warm_compiled
+
+Task = TypeVar("Task")
+Result = TypeVar("Result")
+
+
+def parallel(fn: Callable[[Task], Result], tasks: Iterable[Task], jobs: int,
+             ordered: bool = True) -> Iterator[tuple[Task, Result]]:
+    tasks = list(tasks)
+    if jobs <= 1:
+        for task in tasks:
+            yield task, fn(task)
+        return
+    warm_compiled()  # the planner's compiled loops, made once before the workers fork
+    pool = multiprocessing.Pool(jobs, initializer=signal.signal, initargs=(signal.SIGINT, signal.SIG_IGN))
+    on_main = threading.current_thread() is threading.main_thread()  # where Python runs handlers
+    # Python's own Ctrl-C handler (raises KeyboardInterrupt); after the fork: not the workers'
+    previous = signal.signal(signal.SIGTERM, signal.default_int_handler) if on_main else None
+    try:
+        calls = [(fn, index, task) for index, task in enumerate(tasks)]
+        for index, result in (pool.imap if ordered else pool.imap_unordered)(_call, calls):
+            yield tasks[index], result
+        pool.close()
+    finally:
+        pool.terminate()  # Ctrl-C, an error, or the caller stopped early: no worker outlives us
+        pool.join()
+        if on_main and previous is not None:  # None: set outside Python, nothing to put back
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _call(call: tuple[Callable, int, object]) -> tuple[int, object]:
+    fn, index, task = call
+    return index, fn(task)

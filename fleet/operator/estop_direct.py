@@ -1,0 +1,132 @@
+"""The e-stop's direct path: E_STOP datagrams straight to each car's link, no car process needed.
+
+The operator's tools send as the operator's source (``SOURCE_OPERATOR``), with the car's
+key on an authenticated (version 2) link. A car latches an E_STOP whatever its sequence
+number or session (bridge.carlink.receiver, rule 2), so the operator's datagrams work next
+to a car process's own stream -- or without one, or with one that is hung or never heard
+the stop. :class:`LinkStopper` repeats the E_STOP for ``repeat_s`` (Wi-Fi loses
+datagrams) and PINGs, and reads the cars' answers, which tell whether the latch took. The
+answers only inform: the E_STOPs go out whatever they say.
+
+A car latches per source and only that source's in-session RELEASE clears its latch
+(rule 7), so a release goes this way too (:meth:`LinkStopper.release`), in a new session
+of its own: another tool of the operator's may have sent since. On a version-1 link the
+operator sends nothing but E_STOP and PING (an ordinary datagram out of the car process's
+sequence would break it: rule 5); there the car process's RELEASE clears the latch.
+
+This module imports nothing heavy (no Zenoh, no numpy, not even the typed config); still,
+``trustfg stop`` sends its first E_STOPs before it loads (fleet.operator.estop_first), and this
+path repeats them.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from typing import TYPE_CHECKING, Callable, Iterable
+
+from ...bridge.carlink import E_STOP_FLAGS, SOURCE_OPERATOR, Answer, CommandSender, Flags
+from .estop_first import DIRECT_REPEAT_S
+
+if TYPE_CHECKING:
+    from ...agent.config import Scenario
+
+log = logging.getLogger(__name__)
+
+def named(fleet: "Scenario", cars: Iterable[int] = ()) -> list[int]:
+    """The car ids a command names (none: every car); ValueError for an unknown one."""
+    ids = [c.id for c in fleet.cars]
+    chosen = list(cars) or ids
+    unknown = sorted(set(chosen) - set(ids))
+    if unknown:
+        raise ValueError(f"no car {' '.join(map(str, unknown))} in this fleet (cars: {' '.join(map(str, ids))})")
+    return chosen
+
+
+class LinkStopper:
+    """E_STOP (and PING) datagrams straight to cars' links; see the module docstring."""
+
+    def __init__(self, fleet: "Scenario", clock: Callable[[], float] = time.time):
+        from ...agent.config import ConfigError
+
+        self.clock = clock
+        self.release_s = fleet.operator.session.release_s
+        self.senders: dict[int, CommandSender] = {}
+        self.unreachable: dict[int, str] = {}
+        """Cars without a direct path, and why (their key does not read on this machine, a
+        bad address): the bus path still stops them."""
+        for car in fleet.cars:
+            if not car.link:
+                continue
+            try:
+                self.senders[car.id] = CommandSender.for_car(car, source=SOURCE_OPERATOR, stamp_clock=clock,
+                                                             stop_repeats=0)
+            except ConfigError as exc:
+                self.unreachable[car.id] = str(exc)
+                log.warning("no direct e-stop path to car %d: %s", car.id, exc)
+        self._until: dict[int, float] = {}
+        self._release_until: dict[int, float] = {}
+        self.answers: dict[int, Answer] = {}
+        """The latest answer of each car."""
+        self.answered_at: dict[int, float] = {}
+
+    def engage(self, cars: Iterable[int], now: float, repeat_s: float = DIRECT_REPEAT_S) -> None:
+        """E_STOP to every named car now, and again at every :meth:`step` for ``repeat_s``."""
+        for car in cars:
+            if car in self.senders:
+                self._until[car] = now + repeat_s
+                self.senders[car].send(0.0, 0.0, E_STOP_FLAGS)
+
+    def cancel(self, cars: Iterable[int]) -> None:
+        """Stop repeating the e-stop to the named cars (the operator released them: a
+        repeat arriving after their RELEASE would latch them again)."""
+        for car in cars:
+            self._until.pop(car, None)
+
+    def release(self, cars: Iterable[int], now: float) -> None:
+        """Release the e-stops the operator sent straight to the named cars: end the
+        repeats, then RELEASE (with STOP) in a new session, now and at every :meth:`step`
+        for ``[operator] release_s`` (0.8 s: longer than another session's e-stop repeats,
+        so none still in flight latches the car again). Version-1 links get none (see the
+        module docstring)."""
+        cars = list(cars)
+        self.cancel(cars)
+        for car in cars:
+            sender = self.senders.get(car)
+            if sender is not None and sender.version == 2:
+                sender.renew_session()
+                self._release_until[car] = now + self.release_s
+                sender.send(0.0, 0.0, Flags.STOP | Flags.RELEASE)
+
+    def ping(self, cars: Iterable[int]) -> None:
+        """Ask the named cars for their state (a PING is never applied)."""
+        for car in cars:
+            if car in self.senders:
+                self.senders[car].send(0.0, 0.0, Flags.STOP | Flags.PING)
+
+    def step(self, now: float) -> None:
+        """Repeat pending e-stops; read answers."""
+        for car, until in list(self._until.items()):
+            if now < until:
+                self.senders[car].send(0.0, 0.0, E_STOP_FLAGS)
+            else:
+                del self._until[car]
+        for car, until in list(self._release_until.items()):
+            if now < until:
+                self.senders[car].send(0.0, 0.0, Flags.STOP | Flags.RELEASE)
+            else:
+                del self._release_until[car]
+        for car, sender in self.senders.items():
+            for answer in sender.answers():
+                self.answers[car] = answer
+                self.answered_at[car] = now
+
+    @property
+    def busy(self) -> bool:
+        return bool(self._until or self._release_until)
+
+    def close(self) -> None:
+        for sender in self.senders.values():
+            sender.close()  # stop_repeats=0: it sends nothing on the way out
+        self.senders.clear()
+
