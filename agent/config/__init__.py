@@ -42,22 +42,40 @@ class Scenario:
     """A whole fleet on a map: what ``--scenario FILE`` loads."""
 
     name: str
+    """The scenario's name, shown in logs, records and figures."""
     cars: tuple[CarConfig, ...]
+    """The cars of the fleet, one ``[[cars]]`` table each; at least one."""
     fleet: str = "demo"
+    """The fleet's name: its processes talk on Zenoh keys under it, so two fleets on one
+    network do not hear each other."""
     world: WorldConfig = field(default_factory=WorldConfig)
+    """The map: arena bounds and obstacles."""
     planner: PlannerConfig = field(default_factory=PlannerConfig)
+    """Each car's factor graph and its optimiser."""
     trust: TrustConfig = field(default_factory=TrustConfig)
+    """Each car's trust in its peers: evidence, testimonies, the audit of plans."""
     verify: VerifyConfig = field(default_factory=VerifyConfig)
+    """The check of every plan before a car uses or publishes it, and the fallback."""
     deadlock: DeadlockConfig = field(default_factory=DeadlockConfig)
+    """How cars that block each other are found and which gives way."""
     safety: SafetyConfig = field(default_factory=SafetyConfig)
+    """The required clearance and the margins plans keep beyond it."""
     vehicle: VehicleConfig = field(default_factory=VehicleConfig)
+    """The cars' speed, acceleration and turn-rate limits."""
     tracking: TrackingConfig = field(default_factory=TrackingConfig)
+    """The trajectory-tracking controller's gains and goal tolerance."""
     guard: GuardConfig = field(default_factory=GuardConfig)
+    """The car process's last line of defence: braking for cars and walls ahead."""
     sim: SimConfig = field(default_factory=SimConfig)
+    """Both simulations: sensor noise, message delays and losses, departures."""
     control: ControlConfig = field(default_factory=ControlConfig)
+    """A car's rhythm: how often it commands, replans and publishes."""
     bus: BusConfig = field(default_factory=BusConfig)
+    """How a process joins the fleet's Zenoh network."""
     natnet: NatNetConfig = field(default_factory=NatNetConfig)
+    """Where poses come from: OptiTrack Motive, or mocap_sim, over NatNet."""
     operator: OperatorConfig = field(default_factory=OperatorConfig)
+    """The operator's hold on the fleet: the deadman, restarts, the release, clock checks."""
 
     def validate(self, path: str = "") -> None:
         prefix = f"{path}." if path else ""

@@ -25,13 +25,16 @@ from .checks import ConfigError
 
 @dataclass(frozen=True)
 class Displaced:
-    """Today's liar (paper Sec. IV.C): a fraction ``p`` of plan messages shows the true plan
+    """The paper's false plans (Sec. IV.C): a fraction ``p`` of plan messages shows the true plan
     moved as a whole by U(offset_min_m, offset_max_m) in a uniformly random direction.
     Other attacks that displace plans take these parameters too."""
 
     p: float = 0.4
+    """Fraction of plan messages that lie, 0 to 1."""
     offset_min_m: float = 0.4
+    """Smallest displacement of a false plan."""
     offset_max_m: float = 0.8
+    """Largest displacement of a false plan."""
 
 
 @dataclass(frozen=True)
@@ -41,6 +44,7 @@ class ForgedStamp(Displaced):
     ``displaced`` besides."""
 
     shift_s: float = 0.2
+    """How far every plan's stamp is off the truth: > 0 in the future, < 0 in the past."""
 
 
 @dataclass(frozen=True)
@@ -51,8 +55,11 @@ class Bias:
     ``victim`` 0: the nearest car seen at each message."""
 
     bias_m: float = 0.14
+    """How far every plan is moved along the line to the victim."""
     victim: float = 0
+    """The car the bias aims at; 0: the nearest car seen at each message."""
     direction: float = 1
+    """1: the car claims to be farther from the victim than it is; -1: nearer."""
 
 
 @dataclass(frozen=True)
@@ -62,8 +69,11 @@ class FalseFuture:
     ``ramp_s`` and staying there."""
 
     bend_m: float = 0.6
+    """How far sideways the plan bends at most."""
     ramp_s: float = 1.0
+    """Time from the stamp over which the bend grows to bend_m."""
     side: float = 1
+    """1: the plan bends left of the direction of travel; -1: right."""
 
 
 @dataclass(frozen=True)
@@ -72,6 +82,7 @@ class FalseYield:
     path to a stop within ``stop_s`` and waits there, while the car drives on."""
 
     stop_s: float = 0.5
+    """Time from the stamp within which the announced plan comes to a stop."""
 
 
 @dataclass(frozen=True)
@@ -81,7 +92,9 @@ class OnOff(Displaced):
     repeating from its first message."""
 
     on_s: float = 1.0
+    """How long each burst of lies lasts."""
     off_s: float = 4.0
+    """How long the car is honest between bursts."""
 
 
 @dataclass(frozen=True)
@@ -90,7 +103,9 @@ class Replay:
     if new (fresh stamp and sequence number): it claims to be where it was."""
 
     p: float = 0.4
+    """Fraction of plan messages that replay an old plan, 0 to 1."""
     age_s: float = 1.0
+    """How old the replayed plan is."""
 
 
 @dataclass(frozen=True)
@@ -105,7 +120,9 @@ class Slander:
     ``target`` (0: every peer)."""
 
     amount: float = 30.0
+    """Failures claimed per dimension in each trust report."""
     target: float = 0
+    """The slandered car; 0: every peer."""
 
 
 @dataclass(frozen=True)
@@ -114,7 +131,9 @@ class Praise:
     every peer)."""
 
     amount: float = 30.0
+    """Successes claimed per dimension in each trust report."""
     target: float = 0
+    """The praised car; 0: every peer."""
 
 
 @dataclass(frozen=True)
@@ -125,9 +144,13 @@ class Framing:
     safety failures of the victim. Then it drives to its own goal."""
 
     victim: float = 0
+    """The framed car; 0: the nearest car at the framer's first plan."""
     gap_m: float = 0.35
+    """Distance, centre to centre, at which it follows the victim."""
     duration_s: float = 10.0
+    """How long it tailgates at most before it drives to its own goal."""
     amount: float = 30.0
+    """Safety failures of the victim claimed in each trust report."""
 
 
 @dataclass(frozen=True)
@@ -138,7 +161,9 @@ class Collude(Displaced):
     everyone else."""
 
     amount: float = 30.0
+    """Successes claimed about every partner in each trust report."""
     slander: float = 1
+    """1: its reports also swap its evidence about everyone but its partners; 0: they do not."""
 
 
 ATTACKS: dict[str, type] = {
@@ -164,7 +189,11 @@ class AttackConfig:
     parameters that differ from their defaults."""
 
     name: str
+    """The attack: a name of ATTACKS, or several joined by ``+`` (``"displaced+false-testimony"``
+    is the paper's liar)."""
     params: dict[str, float] = field(default_factory=dict)
+    """Parameters that differ from their defaults, by name (numbers); a parameter two of the
+    named attacks share is set for both."""
 
     @property
     def names(self) -> tuple[str, ...]:

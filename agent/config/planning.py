@@ -20,11 +20,12 @@ class PlannerConfig:
     interp_checks: int = 4
     """Obstacle/proximity checks per interval in addition to the support state itself."""
     qc: float = 0.5
-    """Power spectral density of the white-noise-on-acceleration prior, m^2/s^3."""
+    """Power spectral density of the white-noise-on-acceleration prior, in m^2/s^3."""
     min_horizon_s: float = 2.0
     """A plan never spans less than this, so the last metres are still smooth."""
     cruise_speed_mps: float = 0.4
-    """Nominal speed used to set the planned arrival time (a car may override it)."""
+    """Nominal speed that sets a plan's arrival time when the start names none (``trustfg go
+    --cruise`` names one; the simulations draw each car's from ``sim.cruise_speed_range_mps``)."""
     max_speed_mps: float = 0.6
     """Speeds above this are penalised (soft limit; the vehicle's hard limit is higher)."""
     reach_margin_m: float = 0.5
@@ -33,29 +34,40 @@ class PlannerConfig:
     from where our plan starts (agent.planner.peers_within_reach); covers a plan's small
     excess over the soft speed limit."""
     sigma_start: float = 1e-3
+    """Sigma of the prior that pins a plan's first support state to where the car is, in m."""
     sigma_start_velocity: float = 0.05
+    """Sigma of the prior that pins a plan's first velocity to the car's, in m/s."""
     sigma_goal: float = 0.01
+    """Sigma of the prior that pulls a plan's last support state onto the goal, in m."""
     sigma_goal_velocity: float = 0.01
+    """Sigma of the prior that makes a plan end at rest, in m/s."""
     sigma_obstacle: float = 0.003
-    """Walls are certain and do not move; peers' plans are guesses when late, and their
+    """Sigma of the obstacle hinge (walls and obstacles), in m. Walls are certain and do not move; peers' plans are guesses when late, and their
     berth (up to eps_0 * g_max) holds margin. So where both cannot be kept -- a wide berth
     around a predicted peer in a narrow street -- a plan gives way to the peer, by
     (sigma_obstacle / sigma_proximity)^2 ~ 1/11 as much into the wall (the proximity guard
     keeps the cars apart)."""
     sigma_proximity: float = 0.01
+    """Sigma of the proximity hinge against peers' shared plans, in m."""
     sigma_consistency: float = 0.2
     """Sigma of the consistency residual, in m/s^2."""
     sigma_speed: float = 0.02
+    """Sigma of the soft speed limit's hinge (speed above ``max_speed_mps``), in m/s."""
     sigma_lane: float = 0.15
-    """Sigma of the pull towards the lane centre line, m."""
+    """Sigma of the pull towards the lane centre line, in m."""
     max_iterations: int = 30
+    """Levenberg-Marquardt iterations a replan's optimisation takes at most."""
     relative_error_tol: float = 1e-3
     """LM stops when an iteration lowers the error by less than this fraction; replanning
     is receding-horizon, so the next replan carries on from here."""
     absolute_error_tol: float = 0.05
-    """... or by less than this much cost (1/2 sum of squared whitened residuals)."""
+    """LM also stops when an iteration lowers the cost (1/2 sum of squared whitened
+    residuals) by less than this."""
     lambda_initial: float = 1e-3
+    """Levenberg-Marquardt's damping lambda at the first iteration."""
     lambda_factor: float = 10.0
+    """Levenberg-Marquardt multiplies lambda by this after a rejected step and divides it
+    by this after an accepted one."""
     diagonal_damping: bool = True
     """Damp with lambda * diag(J^T J) (scale-invariant; the hinges are far stiffer than
     the GP prior)."""
@@ -69,9 +81,15 @@ class PlannerConfig:
     lane_keeping: bool = True
     """Pull plans towards the car's route (start, via points, goal): its lane."""
     proximity: bool = True
+    """The proximity factor: plans keep epsilon from peers' shared plans (paper eqs.
+    (7)-(9)). Off (experiments): peers are not planned around."""
     consistency: bool = True
+    """The consistency factor: a plan's accelerations are pulled down to its peers' (paper
+    Sec. III.D). Off (experiments): no such pull."""
     transparency: bool = True
-    """The three trust factors, switchable for the experiments."""
+    """The transparency factor: a peer's epsilon widens as its transparency trust falls
+    (paper Sec. III.D). Off (experiments): every peer is kept at eps_0 times
+    ``trust.epsilon_gain_fixed``."""
 
     def validate(self, path: str) -> None:
         if self.support_states < 3:
@@ -107,8 +125,10 @@ class TrustConfig:
     """A car that did not do what it announced half a second ago counts one failure: cars
     replan, and a changed mind is not a lie."""
     prior_alpha: float = 1.0
+    """Successes (alpha) of the Beta prior every peer starts from; with prior_beta 0 a
+    stranger's trust is tau = 2/3. Forgetting decays every opinion towards the prior."""
     prior_beta: float = 0.0
-    """The Beta prior every peer starts from (tau = 2/3); forgetting decays towards it."""
+    """Failures (beta) of the Beta prior every peer starts from."""
     transparency_tolerance_m: float = 0.15
     """A peer seen within this of where its plan says it is at the plan's stamp: a success;
     beyond it: a failure (agent.audit; the plan's future is graded against a tolerance
@@ -119,6 +139,8 @@ class TrustConfig:
     consistency_tolerance_mps2: float = 0.6
     """Observed vs planned acceleration mismatch that still counts as consistent."""
     evidence_period_s: float = 0.1
+    """How often a car turns what it observes of its peers into safety and consistency
+    evidence."""
     stale_after_s: float = 1.0
     """A peer with no plan for this long is predicted from its observed motion and
     kept at the widest epsilon; silence is never counted as lying."""
@@ -126,10 +148,15 @@ class TrustConfig:
     """A testimony whose mean differs from our own direct estimate by more than this (once
     we hold enough direct evidence) is rejected as a lie and counted."""
     testimony_min_evidence: float = 5.0
+    """Direct evidence about a peer (successes plus failures beyond the prior) a car must
+    hold before it tests testimonies about that peer against its own estimate."""
     epsilon_gain_max: float = 2.0
     """g(tau) ranges from 1 (tau >= tau_full) to this (tau <= tau_floor)."""
     tau_full: float = 0.9
+    """Transparency trust at and above which a peer is kept at eps_0 (g = 1)."""
     tau_floor: float = 0.5
+    """Transparency trust at and below which a peer is kept at the widest epsilon, eps_0
+    times epsilon_gain_max."""
     epsilon_quantile: float = 0.1
     """Epsilon is set by this lower quantile of the transparency belief, not its mean: a
     peer we know little about is kept as far as its 10 % worst case deserves, and only a
@@ -149,10 +176,10 @@ class TrustConfig:
     """An accepted plan is compared with where its sender is seen every this many seconds
     of its future, as each time comes (agent.audit)."""
     audit_horizon_s: float = 3.0
-    """... up to this far past its stamp,"""
+    """How far past its stamp an accepted plan's future is audited."""
     audit_notice_s: float = 0.5
-    """... and only until this long after its sender's next plan: a car that changes its
-    mind and says so this far ahead is not held to its old plan. A car cannot escape the
+    """A plan is audited only until this long after its sender's next plan: a car that
+    changes its mind and says so this far ahead is not held to its old plan. A car cannot escape the
     audit by planning often: the newest plan at least this old is always held to."""
     audit_grace_s: float = 0.3
     """A future moment is audited only this long after it has been observed, so that a
@@ -160,8 +187,7 @@ class TrustConfig:
     audit_tolerance_growth_mps: float = 0.15
     """The audit's tolerance at lag h is transparency_tolerance_m + h * this (and the
     rejection threshold plan_reject_m + h * this): honest plans' futures change as their
-    cars replan (measured on honest runs: up to 0.34 m at 1 s, 0.50 m at 2 s in the
-    8-car intersection; 0.12 m and 0.15 m in the 4-car scenes)."""
+    cars replan."""
     audit_max_plans: int = 32
     """Plans kept per peer for the audit (bounded memory: 5 plans/s over 3 s is 15)."""
     testimony_max_evidence: float = 60.0
@@ -180,8 +206,8 @@ class TrustConfig:
     closes it for good."""
     epsilon_gain_fixed: float = 1.0
     """g for every peer when the transparency factor is off (planner.transparency = false):
-    1 keeps eps_0 from everyone (the paper's baseline); a uniformly careful fleet (the
-    bank's "wide", the adversaries' "wide") keeps a wider berth from everyone."""
+    1 keeps eps_0 from everyone (the paper's baseline); more keeps a uniformly wider berth
+    from everyone."""
 
     def validate(self, path: str) -> None:
         if not 0.0 < self.forgetting <= 1.0:
@@ -257,38 +283,31 @@ class VerifyConfig:
     the car can follow it)."""
     swap_first: bool = True
     """Verification holds a peer where its plan ends for good (a parked car stays parked,
-    a car waiting on our goal is waited for), but for the peer we swap places with -- it
-    stands on our goal and its goal is our start (agent.car_agent) -- when we go first
-    (the deadlock watch's order, agent.deadlock.goes_first): that one only ``peer_hold_s`` past the
-    end of its plan. Each waiting for the other to leave, two such cars stand for good,
-    and a ring of them did: at the go of circle-16 every car's plan failed at its far end
-    against the car waiting on its goal, and the ring stood on its fallbacks for 2-4 s
-    (seed 0: 225 of its 309 fallbacks in the first 4 s). Off: every peer for good (as
-    before stop 37). A hold for every peer, not only the one we swap with, let the cars
-    of bottleneck-4 make for the door before the car on their goal had left (seeds 0-23:
-    22 of 24 at every goal, 24 of 24 held for good)."""
+    a car waiting on our goal is waited for), but the peer we swap places with -- it
+    stands on our goal and its goal is our start (agent.car_agent) -- only ``peer_hold_s``
+    past the end of its plan, when we go first (the deadlock watch's order,
+    agent.deadlock.goes_first): two such cars, each waiting for the other to leave, would
+    stand for good. The hold is for that one peer only: held short, any car standing on
+    our goal would be driven at before it has left. Off: every peer is held for good."""
     peer_hold_s: float = 3.0
-    """... how long: a car that replans five times a second and stops in 0.6 s from top
-    speed needs far less; the peer's next plans say where it is."""
+    """How long past the end of its plan the peer we swap places with is held (swap_first):
+    a car that replans five times a second and stops in 0.6 s from top speed needs far
+    less; the peer's next plans say where it is."""
     pass_head_on: bool = True
-    """On (the default since stop 49): a verified plan that backs away from the goal
-    (agent.safe_plan, BACK_M over BACK_S) in front of a peer coming head on along our way
-    is tried once more, cold along a via point beside the peer's way, on our right; the
-    plan that passes is taken when it verifies and does not back away (``pass``, counted
-    as ``head_on_passes``), and the car plans without lane keeping for
-    agent.car_agent.PASS_HOLD_S after it. Off: the first verified plan is taken as it is --
-    in circle-16 seeds 49 and 69 a car then backed away from its antipodal partner along
-    their shared diameter for 4-8 s, to its own start (the partner's goal), and passed it
-    there, too late for the timeout. The bank on, circle-16 seeds 0-99: 99 of 100 at every
-    goal against 98 off (49 and 69 in, 57 out), flowtime and makespan lower
-    (docs/bank-history.md, stop 49)."""
+    """A verified plan that backs away from the goal (agent.safe_plan, BACK_M over BACK_S)
+    in front of a peer coming head on along our way is tried once more, cold along a via
+    point beside the peer's way, on our right; the plan that passes is taken when it
+    verifies and does not back away (``pass``, counted as ``head_on_passes``), and the car
+    plans without lane keeping for agent.car_agent.PASS_HOLD_S after it. Off: the first
+    verified plan is taken as it is, and two cars meeting head on along one line may back
+    away from each other for seconds before they pass."""
     keep_s: float = 0.0
     """Keep the plan instead of optimising anew, for up to this long after it was
     optimised, while it still verifies from now against what the car knows now (peers'
     newest plans and epsilons, the walls, the limits) and the car tracks it (agent.car_agent,
-    "Kept plans"); counted as ``plans_kept``. 0: optimise at every replan (the default; a
-    kept plan is checked as strictly as a new one but not improved, and the bank has not
-    measured it yet). What it saves is CPU: most replans of a car with a clear way."""
+    "Kept plans"); counted as ``plans_kept``. 0: optimise at every replan. A kept plan is
+    checked as strictly as a new one but not improved; what it saves is CPU: most replans
+    of a car with a clear way."""
 
     def validate(self, path: str) -> None:
         if self.keep_s < 0:
@@ -312,10 +331,12 @@ class DeadlockConfig:
     enabled: bool = True
     """Off (ablations only): deadlocks are still detected and counted, not resolved."""
     window_s: float = 3.0
-    """Short enough that cars standing in a door for 6-7 s at a time (bottleneck-4) are
-    seen as deadlocked; a car taken for deadlocked while it waits its turn gives way for
-    a moment and carries on (issue 9, stops 21-23)."""
+    """How long a car must have come less than progress_m nearer its goal to count as
+    stalled: short enough that cars standing in a door for several seconds are seen as
+    deadlocked; a car taken for deadlocked while it waits its turn gives way for a moment
+    and carries on."""
     progress_m: float = 0.1
+    """A car that has come less than this nearer its goal over window_s is stalled."""
     group_radius_m: float = 1.0
     """Peers nearer than this (centres) that are stuck too belong to our group."""
     yield_s: float = 3.0

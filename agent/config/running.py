@@ -15,10 +15,15 @@ class VehicleConfig:
     """Unicycle limits of a car (hard limits of the vehicle model and the controller)."""
 
     max_speed_mps: float = 0.8
+    """Fastest a car drives forwards."""
     max_reverse_mps: float = 0.0
+    """Fastest a car drives backwards; 0: it never reverses."""
     max_accel_mps2: float = 1.5
+    """Largest change of speed per second, speeding up or braking."""
     max_turn_rate_radps: float = 3.0
+    """Fastest a car turns."""
     max_turn_accel_radps2: float = 12.0
+    """Largest change of turn rate per second."""
 
     def validate(self, path: str) -> None:
         for name in ("max_speed_mps", "max_accel_mps2", "max_turn_rate_radps",
@@ -33,11 +38,11 @@ class TrackingConfig:
     """Gains of the unicycle trajectory-tracking controller (bridge.trajectory_controller)."""
 
     k_along: float = 1.5
-    """1/s, gain on the along-track error."""
+    """Gain on the along-track error, in 1/s."""
     k_cross: float = 6.0
-    """1/m^2-ish, gain on the cross-track error (scaled by reference speed)."""
+    """Gain on the cross-track error, scaled by the reference speed, in 1/m^2."""
     k_heading: float = 3.0
-    """1/s, gain on the heading error."""
+    """Gain on the heading error, scaled by the reference speed, in 1/m."""
     goal_tolerance_m: float = 0.05
     """A car is at its goal (and at any resting point of its plan) when it sees itself
     this close; it then stops. The one goal tolerance of trustfg (Scenario.arrival_radius_m
@@ -64,10 +69,10 @@ class GuardConfig:
     Off in the in-process experiments, which measure the planner's own factors."""
 
     enabled: bool = True
+    """Off: a car's commands are not capped by the guard."""
     stop_margin_m: float = 0.05
     """How far beyond the breach distance (SafetyConfig) a car must have stopped, for pose
-    noise and latency (stopping right at the breach line breached it by 3 mm in a
-    partition run)."""
+    noise and latency."""
     decel_mps2: float = 1.0
     """Braking the guard counts on (below the vehicle's max_accel_mps2, for margin)."""
     reaction_s: float = 0.1
@@ -97,7 +102,10 @@ class ControlConfig:
     the lab)."""
 
     command_rate_hz: float = 50.0
+    """How often a car's velocity command is computed and sent (the in-process fleet steps
+    physics and control at this rate too)."""
     replan_period_s: float = 0.2
+    """How often a car replans."""
     plan_period_s: float = 0.1
     """How often a car publishes its latest plan (best effort: each supersedes the last).
     More often than it replans, so that a peer still gets one within a second when most
@@ -108,9 +116,13 @@ class ControlConfig:
     lap_turn_s: float = 2.0
     """Between laps a car turns in place towards its next leg for this long, then drives."""
     trust_report_period_s: float = 0.5
+    """How often a car publishes its trust report: its direct evidence about every peer,
+    the testimony its peers fuse."""
     pose_period_s: float = 0.05
     """How often a car publishes its own pose on the bus."""
     status_period_s: float = 0.5
+    """How often a car publishes its status (mode and counters); a change of mode goes out
+    at once."""
     pose_timeout_s: float = 0.2
     """A car whose own pose is older than this is commanded to stop."""
     start_timeout_s: float = 0.0
@@ -195,11 +207,19 @@ class BusConfig:
     """
 
     mode: str = "peer"
+    """'peer': processes talk to each other directly; 'client': through the Zenoh router
+    named in ``connect``."""
     listen: tuple[str, ...] = ()
+    """Zenoh endpoints every process of the fleet listens on, e.g. ``tcp/10.0.0.11:7447``."""
     connect: tuple[str, ...] = ()
+    """Zenoh endpoints a process connects to: its peers' listening endpoints, or a router."""
     multicast_scouting: bool = False
+    """Find peers by Zenoh's multicast scouting; off: only the listed endpoints are used."""
     multicast_interface: str = ""
+    """Network interface multicast scouting uses, e.g. ``wlan0``; empty: Zenoh's choice."""
     zenoh_config: str = ""
+    """A Zenoh JSON5 config file taken as the base (TLS, access control) that the keys here
+    complete; empty: none."""
     queue_size: int = 4096
     """Received samples waiting for the agent; beyond this the oldest are dropped (counted)."""
     max_links: int = 4
@@ -230,8 +250,11 @@ class NatNetConfig:
     mode: str = "multicast"
     """'multicast' (Motive's default) or 'unicast'."""
     multicast_group: str = "239.255.42.99"
+    """The multicast group Motive streams its frames to (mode 'multicast')."""
     command_port: int = 1510
+    """Motive's UDP command port: the handshake goes there."""
     data_port: int = 1511
+    """The UDP port frames of data arrive on."""
     local_interface: str = "0.0.0.0"
     """Local address to bind and to join the multicast group on."""
     version: str = ""

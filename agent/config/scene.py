@@ -15,9 +15,13 @@ class Obstacle:
     (``kind = "polygon"``, ``points`` counter-clockwise or clockwise), in metres."""
 
     kind: str = "rect"
+    """'rect' or 'polygon'."""
     min: tuple[float, float] = (0.0, 0.0)
+    """A rect's lower-left corner (x, y), in m."""
     max: tuple[float, float] = (0.0, 0.0)
+    """A rect's upper-right corner (x, y), in m."""
     points: tuple[tuple[float, float], ...] = ()
+    """A polygon's corners (x, y) in order, in m; at least three."""
 
     def validate(self, path: str) -> None:
         if self.kind == "rect":
@@ -39,6 +43,7 @@ class WorldConfig:
     resolution_m: float = 0.01
     """Cell size of the signed distance field."""
     obstacles: tuple[Obstacle, ...] = ()
+    """Obstacles inside the arena: rects and polygons."""
 
     def validate(self, path: str) -> None:
         x0, y0, x1, y1 = self.bounds_m
@@ -54,15 +59,22 @@ class CarConfig:
     """One car of the fleet: where it starts, where it goes and how it may misbehave."""
 
     id: int
+    """The car's id, 1 to 255: its name on the bus, in logs and figures, and its rigid body
+    in Motive unless ``rigid_body`` names another."""
     start: tuple[float, float]
+    """Where the car starts (x, y), in m."""
     goal: tuple[float, float]
+    """Where the car goes (x, y), in m."""
     route: tuple[tuple[float, float], ...] = ()
     """Optional via points between start and goal (lane centre lines). They only seed the
     first plan and estimate the path length; the optimiser is free to leave them."""
     start_heading_rad: float | None = None
     """Heading at the start; default: towards the first via point (or the goal)."""
     radius_m: float = 0.1
+    """The car's radius; every safety distance follows it (SafetyConfig)."""
     color: str = ""
+    """The car's colour in figures and on the dashboard, a matplotlib name; empty: the
+    next of a fixed palette."""
     attack: AttackConfig | None = None
     """How this car lies (experiments only; agent.attacks, config.attacks); none: honest."""
     clock_offset_s: float = 0.0
@@ -169,18 +181,22 @@ class SimConfig:
     control at ``control.command_rate_hz``) and the departures ``trustfg sim`` draws."""
 
     observation_noise_m: float = 0.002
+    """In-process fleet: the standard deviation of the Gaussian noise added to every pose
+    observation, per axis (seeded)."""
     message_latency_s: float = 0.02
     """In-process fleet: every fleet message arrives this late ..."""
     message_jitter_s: float = 0.0
-    """... plus U(0, this), in order per sender and receiver (seeded per run)."""
+    """In-process fleet: every fleet message arrives a further U(0, this) late, in order per
+    sender and receiver (seeded per run)."""
     message_loss: float = 0.0
     """In-process fleet: the probability that a message is lost for a receiver (seeded)."""
     timeout_s: float = 45.0
+    """A simulated run ends after this long, every car arrived or not (``trustfg sim``
+    allows this per lap, and some slack)."""
     start_delay_max_s: float = 2.0
-    """Each car waits U(0, this) before it moves: desynchronised starts per seed. On the
-    intersection's right-hand lanes two crossing cars that start together reach their
-    crossing 0.8 m (about 2 s) apart, so real conflicts need offsets of that size: with
-    2 s, 30 of 40 seeds breach with avoidance off."""
+    """Each car waits U(0, this) before it moves: desynchronised starts per seed. Two
+    crossing cars that start together on the intersection's right-hand lanes reach their
+    crossing about 2 s apart, so real conflicts need offsets of that size."""
     cruise_speed_range_mps: tuple[float, float] = (0.35, 0.45)
     """Each car's cruise speed is drawn from this range per seed."""
     replan_phase_max_s: float | None = None
