@@ -4,6 +4,8 @@ suite's split into two xdist workers (real time, and simulated time at nice 19).
 
 from __future__ import annotations
 
+import ast
+import functools
 import itertools
 import os
 import socket
@@ -50,27 +52,13 @@ def wait_for(predicate, timeout: float = 5.0, interval: float = 0.01) -> bool:
 
 # --- two workers: real time in one, simulated time beside it at the lowest priority -------
 
-COMPUTE_MODULES = (
-    "agent/test_attacks.py", "agent/test_car_agent.py", "agent/test_clocks.py", "agent/test_config.py",
-    "agent/test_deadlock.py", "agent/test_defences.py", "agent/test_factors.py",
-    "agent/test_first_false_claim.py", "agent/test_fleet_sim.py", "agent/test_gp.py", "agent/test_guard.py",
-    "agent/test_interval_kernel.py", "agent/test_kept_plans.py", "agent/test_lost_notice.py",
-    "agent/test_operation.py", "agent/test_planner.py", "agent/test_routes.py", "agent/test_safe_plan.py",
-    "agent/test_track.py", "agent/test_trust.py", "agent/test_trust_cache.py", "agent/test_verify.py",
-    "agent/test_world.py", "fleet/test_baselines.py", "fleet/test_bank.py", "fleet/test_pipeline.py",
-    "fleet/test_scenes.py", "fleet/test_stats.py", "fleet/test_trust_record.py", "fleet/test_car_report.py",
-    "bridge/test_natnet_frame.py", "bridge/test_natnet_model.py", "bridge/test_natnet_packet.py",
-    "bridge/test_natnet_properties.py", "bridge/test_natnet_coordinates.py", "bridge/test_natnet_handshake.py",
-    "bridge/test_carlink_codec.py", "bridge/test_carlink_properties.py", "bridge/test_carlink_receiver.py",
-    "bridge/test_carlink_v2.py", "bridge/test_drive.py", "bridge/test_motion_watch.py", "bridge/test_tracking.py",
-    "dashboard/test_state.py", "mocap_sim/test_vehicle.py", "test_cli.py",
-)
-"""Test modules whose outcome is simulated time and CPU alone: no socket, no process that
-keeps time, no clock read. Under pytest-xdist (``pytest -n 2``) they run in
-a worker of their own at the lowest CPU priority (nice 19), on the core the real-time
-tests leave idle (those keep 1.1 of 2 cores busy on average: fleets of car processes,
-browsers, network namespaces); every other module runs in the other worker, in order, at
-normal priority, as in a run without xdist."""
+REAL_TIME_MARKS = frozenset({"realtime", "browser", "faults"})
+"""A test module marked with one of these (its module-level ``pytestmark``) keeps time:
+sockets, processes, clocks, a browser or network namespaces. Under pytest-xdist
+(``pytest -n 2``) those modules run in one worker, in order, at normal priority; every
+other module's outcome is simulated time and CPU alone, and runs in a worker of its own at
+the lowest CPU priority (nice 19), on the core the real-time tests leave idle (they keep
+about 1.1 of 2 cores busy: fleets of car processes, browsers, network namespaces)."""
 
 COMPUTE, REAL_TIME = "compute", "real-time"
 WORKERS_DONE = "workers-done"
@@ -78,10 +66,21 @@ WORKERS_DONE = "workers-done"
 check waits for every other worker's."""
 
 
+@functools.cache
+def module_marks(module: str) -> frozenset[str]:
+    """The marks a test module sets on all its tests (its ``pytestmark``), read from its
+    source: xdist's scheduler sees node ids, not collected items."""
+    tree = ast.parse((ROOT / module).read_text())
+    for node in tree.body:
+        if isinstance(node, ast.Assign) and any(getattr(t, "id", None) == "pytestmark" for t in node.targets):
+            return frozenset(n.attr for n in ast.walk(node.value)
+                             if isinstance(n, ast.Attribute) and getattr(n.value, "attr", None) == "mark")
+    return frozenset()
+
+
 def group_of(nodeid: str) -> str:
-    """The worker group of a test, from its module (``tests/agent/test_gp.py::...``)."""
-    module = nodeid.split("::")[0].removeprefix("tests/")
-    return COMPUTE if module in COMPUTE_MODULES else REAL_TIME
+    """The worker group of a test, from its module's marks (``tests/agent/test_gp.py::...``)."""
+    return REAL_TIME if module_marks(nodeid.split("::")[0]) & REAL_TIME_MARKS else COMPUTE
 
 
 @pytest.hookimpl(optionalhook=True)  # a hook of pytest-xdist, a test dependency
@@ -111,7 +110,13 @@ def pytest_sessionstart(session):
 
 
 def pytest_collection_modifyitems(config, items):
-    """The leftover check runs last, after every other test has cleaned up."""
+    """The leftover check runs last, after every other test has cleaned up. A real-time mark
+    set on a single test instead of its module is refused: the worker split reads modules."""
+    for item in items:
+        marks = {mark.name for mark in item.iter_markers()} & REAL_TIME_MARKS
+        if marks and not module_marks(item.nodeid.split("::")[0]) & REAL_TIME_MARKS:
+            raise pytest.UsageError(f"{item.nodeid}: mark the whole module with pytestmark = "
+                                    f"pytest.mark.{sorted(marks)[0]} (the worker split reads module marks)")
     last = [item for item in items if item.nodeid.endswith("test_nothing_is_left_behind")]
     items[:] = [item for item in items if item not in last] + last
 

@@ -20,6 +20,8 @@ from trustfg.bridge.natnet_client import (
     arrival,
 )
 
+pytestmark = pytest.mark.realtime
+
 POSE = ((0.5, 0.25, -1.0), (0.0, 0.0, 0.0, 1.0))
 
 

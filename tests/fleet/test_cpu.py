@@ -21,6 +21,8 @@ from trustfg.fleet.cpu import (
     share,
 )
 
+pytestmark = pytest.mark.realtime
+
 # A real /proc/PID/stat line shape (proc(5)), with a command name holding ') (' and spaces.
 STAT = ("4242 (trustfg car) (1)) S 1 4242 4242 0 -1 4194560 2810 0 0 0 "
         "1234 567 8 9 20 0 7 0 123456 1490000000 36000 18446744073709551615 1 1 0 0 0 0 0 "

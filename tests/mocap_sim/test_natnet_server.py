@@ -17,6 +17,8 @@ from trustfg.bridge.natnet import V3_0, V4_1, MessageId, Version
 from trustfg.bridge.natnet_client import NatNetClient, NatNetClientOptions
 from trustfg.mocap_sim.natnet_server import NatNetServer, NatNetServerOptions, Occlusion
 
+pytestmark = pytest.mark.realtime
+
 CLIENT = ("127.0.0.1", 40000)
 
 

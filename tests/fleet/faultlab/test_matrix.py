@@ -1,0 +1,95 @@
+"""The fault matrix, one run per fault: every car process in its own network namespace.
+
+Needs root (ip netns, nftables): skipped with the reason otherwise. The expectations are
+those of the faults issue; fleet/faults.py documents how each number is measured.
+"""
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from trustfg.fleet.faultlab import netem
+from trustfg.fleet.faultlab.matrix import CASES
+
+pytestmark = [pytest.mark.faults, pytest.mark.realtime,
+              pytest.mark.skipif(netem.available() is not None, reason=str(netem.available()))]
+
+STOP_WITHIN_S = 0.25 + 0.02  # the 250 ms watchdog, plus mocap-sim's physics scheduling (5 ms ticks)
+RECOVER_WITHIN_S = 3.0  # plans resynchronised after a heal, or once a restarted process is up (measured 0.8-1.4 s)
+REJOIN_WITHIN_S = 10.0  # a restarted car process back on the bus: it came back (its start-up, 2.1 s on 2 busy
+# cores, is a speed of this machine, reported as time_to_rejoin_s by `trustfg faults`, not a timed test)
+TRUST_FLOOR = 0.6  # below the prior (2/3) only by evidence of misbehaviour, never by silence
+PLAN_AGE_P99_MS = 1000  # a car's view of every peer's plan at 50 % loss (best-effort plans;
+# at 50 % it held in 24 of 24 runs once Zenoh got more receiving threads, fleet/bus.py RX_THREADS)
+PLAN_AGE_P50_MS_AT_50 = 300  # at 50 %: fresh most of the time (TCP alone: p50 8.5 s)
+
+
+SUBSUMED = {
+    "baseline": "every case asserts what the fault-free run does (no crash, no breach, every goal, trust)",
+    "delay-50ms": "lossy-clock has the same delay, with loss and a skewed clock on top, and asserts more",
+    "loss-10": "loss-50 asserts the same at more loss",
+    "loss-30": "loss-50 asserts the same at more loss, and lossy-clock has 30 % loss with delay and a skewed clock",
+}
+"""Cases the CLI matrix (``trustfg faults``) runs and the suite leaves out, and why: a
+case costs about 20 s of the suite's 15-minute budget."""
+
+
+CASE_TIMEOUT_S = 300.0
+"""A case takes 20-40 s; this only bounds a hung one."""
+
+
+def run_as_a_lab_does(name: str, out) -> dict:
+    """One run of case ``name`` (seed 0) by ``trustfg faults``, in a process of its own as
+    a lab runs it: what its Zenoh sessions hold goes with it. (Run in the test's own
+    process, a TCP listener was left open after `link-cut-entry` until the suite's end, in
+    one of five two-worker runs: most likely the run's observer session, whose close Zenoh
+    gives up on after 10 s when a peer stops reading -- fleet.bus.session counts that,
+    ``observer_close`` in the row.)"""
+    command = [sys.executable, "-m", "trustfg", "faults", "--cases", name, "--seeds", "1", "--out", str(out)]
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        stdout, stderr = process.communicate(timeout=CASE_TIMEOUT_S)
+    finally:
+        if process.poll() is None:  # SIGTERM unwinds: its namespaces, rules and processes go
+            process.terminate()
+            try:
+                process.wait(30)
+            except subprocess.TimeoutExpired:
+                process.kill()
+                process.wait()
+    assert process.returncode == 0, f"trustfg faults exited {process.returncode}:\n{stdout[-2000:]}\n{stderr[-4000:]}"
+    return json.loads((out / "faults.json").read_text())[0]
+
+
+@pytest.mark.parametrize("name", [name for name in CASES if name not in SUBSUMED])
+def test_fault(name, tmp_path):
+    case = CASES[name]
+    row = run_as_a_lab_does(name, tmp_path / name)
+    print(f"row: {row}")  # whole, on a failure (an assertion's message is cut at 240 characters)
+    assert row["crashed"] == [], row
+    assert row["breaches"] == 0, row
+    if case.link_cut:
+        assert row["goals"] >= row["cars"] - 1, row  # the car without a link cannot arrive
+    else:
+        assert row["goals"] == row["cars"], row
+    if case.measures_stop:
+        assert row["fault_at_s"] is not None, "the fault never fired: the victim never drove"
+        assert row["time_to_stop_s"] is not None and row["time_to_stop_s"] <= STOP_WITHIN_S, row
+    if case.measures_recovery:
+        assert row["time_to_recover_s"] is not None and row["time_to_recover_s"] <= RECOVER_WITHIN_S, row
+    if case.restarts:
+        assert row["time_to_rejoin_s"] is not None and row["time_to_rejoin_s"] <= REJOIN_WITHIN_S, row
+    assert row["honest_trust_min"] >= TRUST_FLOOR, row
+    if name == "lossy-clock":  # an honest fleet under loss, delay and a skewed clock stays trusted
+        assert row["trust_after_3s"] is not None, row
+        # Issue 10's acceptance point. With the delay relayed on each car's TCP link only (no
+        # UDP link, unlike every other case), 5 of 41 runs fell below (0.739-0.797, CI's
+        # among them: links stalled for seconds); with its UDP link relayed too (stop 32),
+        # 40 of 40 at 0.822-0.950 (`trustfg faults --cases lossy-clock --seeds 8`, 5 times).
+        assert row["trust_after_3s"] >= 0.8, row
+    if name == "loss-50":
+        assert row["plan_age_ms_p99"] <= PLAN_AGE_P99_MS, row
+        assert row["plan_age_ms_p50"] <= PLAN_AGE_P50_MS_AT_50, row
+        assert row["trust_after_3s"] is not None and row["trust_after_3s"] >= 0.8, row  # loss is no lie

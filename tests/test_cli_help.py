@@ -1,0 +1,88 @@
+"""Every ``trustfg`` command: --help shows every default and a whole description; a user
+error is one line on stderr with a non-zero exit, never a traceback."""
+
+import argparse
+import importlib
+import subprocess
+import sys
+
+import pytest
+
+from trustfg.cli import COMMANDS
+
+pytestmark = pytest.mark.realtime
+
+
+class Captured(Exception):
+    pass
+
+
+def parser_of(name, monkeypatch) -> argparse.ArgumentParser:
+    """The parser a command builds (caught when it parses)."""
+    seen = {}
+
+    def capture(self, args=None, namespace=None):
+        seen["parser"] = self
+        raise Captured
+
+    monkeypatch.setattr(argparse.ArgumentParser, "parse_args", capture)
+    with pytest.raises(Captured):
+        importlib.import_module(COMMANDS[name][0]).main([])
+    return seen["parser"]
+
+
+@pytest.mark.parametrize("name", list(COMMANDS))
+def test_help_shows_every_default_and_a_whole_description(name, monkeypatch):
+    parser = parser_of(name, monkeypatch)
+    formatter = parser._get_formatter()
+    for action in parser._actions:
+        default = action.default
+        if action.required or default is None or default is False or default == argparse.SUPPRESS or default == []:
+            continue
+        text = formatter._expand_help(action) if action.help else ""
+        assert "default" in text, f"{name} {'/'.join(action.option_strings) or action.dest}: {text!r}"
+    description = (parser.description or "").rstrip()
+    assert description and description[-1] in ".):", f"{name}: description cut off: {description[-40:]!r}"
+
+
+@pytest.mark.parametrize("argv", [
+    ["stop", "--config", "no-such-fleet"],
+    ["stop", "--config", "intersection", "--cars", "9"],
+    ["stop", "--config", "intersection", "--release", "--path", "link"],
+    ["check", "--config", "intersection", "--wait", "0"],
+    ["go", "--config", "no-such-fleet"],
+    ["go", "--config", "intersection", "--lead", "0"],
+    ["car", "--id", "9", "--config", "intersection"],
+    ["car", "--id", "1", "--config", "intersection"],  # a scene has no car links
+    ["car", "--id", "1", "--config", "deploy/lab/fleet-secure.toml"],  # its zenoh_config is not on this machine
+    ["dashboard", "--config", "intersection", "--port", "1", "--host", "192.0.2.1"],
+    ["dashboard", "--config", "deploy/lab/fleet-secure.toml", "--operator", "--host", "0.0.0.0"],
+    ["sim", "--deadman", "-1"],
+    ["secure-config", "--fleet", "x", "--cars", "1", "--certs", "nowhere", "--identity", "car2", "--out", "x"],
+])
+def test_a_user_error_is_one_line_and_a_non_zero_exit(argv):
+    done = subprocess.run([sys.executable, "-m", "trustfg", *argv], capture_output=True, text=True, timeout=60)
+    lines = [line for line in done.stderr.splitlines() if line.strip()]
+    assert done.returncode != 0, done.stderr
+    assert len(lines) == 1 and "Traceback" not in done.stderr, done.stderr
+    assert lines[0].startswith(f"trustfg {argv[0]}"), lines
+
+
+@pytest.mark.parametrize("name", list(COMMANDS))
+def test_an_option_is_named_whole(name, monkeypatch):
+    """`trustfg faults --seed 40` ran 40 runs: argparse took it for `--seeds`. Every
+    command refuses a shortened option."""
+    parser = parser_of(name, monkeypatch)
+    assert parser.allow_abbrev is False
+
+
+@pytest.mark.parametrize("argv", [["faults", "--seed", "3"], ["scenario", "generate", "--kind", "circle", "--car", "4",
+                                                               "--out", "x.toml"]])
+def test_a_shortened_option_is_a_usage_error_and_runs_nothing(argv, monkeypatch):
+    """Parsed only (never run: a regression must not start a fault matrix), a subcommand's
+    parser included."""
+    real = argparse.ArgumentParser.parse_args
+    parser = parser_of(argv[0], monkeypatch)
+    with pytest.raises(SystemExit) as exit_:
+        real(parser, argv[1:])
+    assert exit_.value.code == 2
