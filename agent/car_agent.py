@@ -1,92 +1,25 @@
-"""One car's agent: what it sees, what it is told, whom it trusts and what it plans.
+"""One car's mind: what it sees, what it believes of its peers, what it plans and what it shares.
 
-Pure logic, no I/O: the in-process simulation (fleet.sim.in_process) and the car process hand
+Pure logic, no I/O: the in-process fleet (fleet.sim.in_process) and the car process hand
 it observations and decoded messages and ask it for plans and reports at the times they
-choose. All times are seconds on the fleet clock.
+choose. All times are seconds on the fleet clock. It reads as four steps:
 
-How peers' plans are used (agent.evidence; docs/architecture.md, "Trust"):
-* A plan message is moved onto our clock by its sender's estimated clock offset (a stamp
-  too far in the future is refused) and checked against where its sender was seen at
-  its stamp; the discrepancy is transparency evidence (graded, agent.trust). A plan that
-  misses by more than ``plan_reject_m`` is not planned against: we keep the sender's last
-  plan that agreed with what we saw. Observation beats testimony.
-* Every accepted plan is audited as its future comes (agent.audit): a future that does
-  not come true is evidence against its sender (its epsilon widens).
-* A plan not checked yet is planned against only at the widest epsilon; a peer with no
-  usable plan for ``stale_after_s`` (silent, partitioned, or lying every time) is
-  predicted from its observed motion and kept at the widest safety distance. Silence is
-  never counted as lying: it yields no transparency evidence at all.
-* Safety and consistency evidence come every ``evidence_period_s`` from observations.
-  Safety blames only a car that closes on another inside the breach distance.
-  Consistency compares accelerations averaged over CONSISTENCY_WINDOW_S: the change of
-  the peer's observed velocity over the window against the change announced by the plan
-  it had made when the window began (by the plan's stamp) -- "did it do what it said it
-  would do?". Differencing velocities over half a second is far less noisy than a second
-  derivative of noisy poses, and one plan for both ends keeps late or bunched messages
-  from looking like erratic driving. Without a plan made within one replan period (plus
-  REPLAN_MARGIN_S) of the window's start -- lost or delayed messages -- there is no
-  consistency evidence; a change of mind announced at once excuses what follows it. A
-  window is judged ``stale_after_s`` after it ends -- when every plan that could still
-  be believed for it has arrived -- so a plan held up in the network is not read as a
-  car that failed to say what it did (loss and delay cost honest cars no trust). A
-  window in which the proximity guard (agent.guard), fed the poses we see, would have
-  held the peer below its plan's speed, or in which it faced further than
-  ``TrackingConfig.turn_first_deg`` from where its plan went (its tracker turns it on the
-  spot first: a start facing elsewhere, a plan that swerves from a standstill), holds it
-  only to going no faster than it said: every honest car's guard slows it unannounced
-  when another car or a wall comes close ahead, and its tracker turns before it drives.
-  Such windows still count (a car queued behind another for seconds is not left at the
-  prior), and a car that announces it waits and drives on fails them. A failure in
-  a window in which a plan of the peer's that could have told the change was lost (a
-  gap in its sequence numbers), came too late to use, or has not come yet (nothing
-  heard stamped that late: a stalled link) is not recorded either (counted): an honest
-  car's notice held up in the network is not its fault; successes still count, so loss
-  does not leave a peer at the prior. A liar that skips sequence numbers on purpose (or
-  holds its plans back) escapes consistency failures that way -- it still meets the
-  check at the stamp and the audit (held a period plus the notice), and the margin and
-  the guard bound the rest (README, false-yield).
+* see: :meth:`CarAgent.observe` keeps every car's sightings (agent.sightings);
+* believe: :meth:`CarAgent.receive` takes peers' plans and testimonies (agent.evidence),
+  and :meth:`CarAgent.gather_evidence` audits and judges them (agent.witness);
+* plan: :meth:`CarAgent.replan` plans against the believed peers at the epsilon their
+  trust earns, verified, with its fallback (agent.safe_plan, agent.deadlock);
+* share: :meth:`CarAgent.plan_message` and :meth:`CarAgent.trust_message`.
 
-A liar (``car.attack``, agent.attacks) plans and drives like everyone else and lies in
-what it publishes.
-
-Decentralised consensus: every agent replans at a fixed rate against the latest accepted
-plans of its peers and publishes its own; the fleet iterates to agreement. Ties and
-oscillations are broken by (1) desynchronised replanning phases, (2) warm starts, which
-keep each car near its previous plan (a car does not flip sides between replans), and
-(3) a planned arrival time that never lies further ahead than the remaining path at
-cruise speed, so a car always intends to move on and waits only while someone is in
-its way (no car plans to wait for another that waits for it).
-
-Seen standing (``trust.standing_seen_s`` > 0, 1 s by default; with the transparency factor
-on, as the widening it undoes is trust's): a distrusted peer (its transparency trust
-below a stranger's, TrustBook.distrusted) that we have seen stand
-still that long -- every observation of it within STANDING_SEEN_M of the newest, none
-older than ``stale_after_s`` -- is planned against where it stands, at eps_0 if its
-epsilon would be wider, whatever its plans say. Epsilon widens with distrust because a
-distrusted car may be elsewhere than it says; one seen standing is where it is seen, and
-from rest it closes a gap slowly: at the vehicle's 1.5 m/s^2, 1/2 a t^2 = 0.05 m in the
-0.25 s a replan and a frame take to see it go, a third of eps_0's 0.15 m beyond the
-breach distance -- no more than an honest car parked there could do unannounced; the
-guard is under both. The moment it moves the rule lets go. Peers not distrusted keep
-their plans and epsilons: an honest car waiting to go has announced when it goes, and
-taking it for one that stays threw that away (bottleneck-4 seed 25, a standoff).
-
-Kept plans (``verify.keep_s`` > 0; off by default): a replan may keep the current plan
-instead of optimising anew -- for at most ``keep_s`` after it was optimised, only while
-the car tracks it (a new plan would start from it), it still goes to the goal, no
-deadlock rule sends the car elsewhere, and it verifies from now
-(agent.verify, ``t_from``) against the peers' newest plans with their present epsilons,
-the walls and the limits -- the same check a new plan must pass. Otherwise the replan
-optimises as always. It trades plans improved at every period for CPU.
+How peers' plans are believed, seen standing, kept plans and the fleet's consensus are
+told in docs/design/trust.md and docs/design/planner.md.
 """
 
 from __future__ import annotations
 
-import bisect
 import dataclasses
 import logging
 import math
-import operator
 import time
 from collections import Counter, deque
 from collections.abc import Callable
@@ -97,15 +30,15 @@ import numpy as np
 from .attacks import Liar
 from .config import CarConfig, Scenario
 from .deadlock import DeadlockWatch, goes_first, peers_seen
-from .evidence import PeerView, audit, belief, safety_verdict, take_plan
+from .evidence import PeerView, belief, take_plan
 from .gp import Plan, standing
-from .guard import capped_below
 from .messages import PlanMessage, TrustReport
 from .planner import PeerConstraint, PlanningError, PlanRequest, PlanResult
 from .safe_plan import FALLBACK, FIRST, KEPT, RETRY, Outcome, plan_safely
 from .sightings import Track
-from .trust import CONSISTENCY, SAFETY, TrustBook, graded
+from .trust import TrustBook
 from .verify import Bounds, verify
+from .witness import Witness, recorder
 from .world import SignedDistanceField
 
 log = logging.getLogger(__name__)
@@ -117,16 +50,6 @@ ARRIVAL_SLACK_S = 1.0
 """Added to path length / cruise speed: time to speed up and slow down."""
 STALE_PREDICTION_S = 1.0
 """A silent peer is predicted to keep its observed velocity this long, then to stop."""
-CONSISTENCY_WINDOW_S = 0.5
-REPLAN_MARGIN_S = 0.15
-"""Consistency is judged only against a plan stamped at most one replan period plus this
-before the window began. An older announcement has been superseded by plans we never
-received (loss, delay); holding a car to it would read silence as erratic driving."""
-ANNOUNCED_MIN_S = 0.2
-"""A change of plan excuses what a car did only over at least this long after it."""
-GUARD_SLACK_MPS = 0.05
-"""A peer counts as held by its guard when the cap we compute for it is this much below
-its plan's speed (our view of the poses is not exactly its own)."""
 STANDING_SEEN_M = 0.02
 """A peer whose observations over ``trust.standing_seen_s`` all lie this close to its newest
 stands still (motion capture's noise is a millimetre or so)."""
@@ -171,7 +94,7 @@ class CarAgent:
         self.counters: Counter = Counter()
         self.at_goal = False
         self._seq = Counter()
-        self._last_evidence = -np.inf
+        self.witness = Witness(self.car.id, self.scenario, self.sdf, self.radius)
         self.radii = {c.id: c.radius_m for c in self.scenario.cars}
         self.liar = None
         if self.car.attack is not None:
@@ -205,16 +128,13 @@ class CarAgent:
             view.clock.add(message.stamp, now)
             self.trust.receive(message, now)
             return
-        take_plan(view, message, now, self.tracks.get(message.sender), self._recorder(message.sender, now),
+        take_plan(view, message, now, self.tracks.get(message.sender), recorder(self.trust, message.sender, now),
                   self.counters)
 
     def view(self, peer: int) -> PeerView:
         if peer not in self.peers:
             self.peers[peer] = PeerView(self.scenario.trust, self.scenario.control.replan_period_s)
         return self.peers[peer]
-
-    def _recorder(self, peer: int, now: float):
-        return lambda dimension, success, failure: self.trust.record(peer, dimension, success, failure, now)
 
     def clock_offsets(self) -> dict[int, float]:
         """Every peer's estimated clock offset (its clock minus ours), seconds."""
@@ -232,63 +152,12 @@ class CarAgent:
 
     def next_evidence_at(self) -> float:
         """When gather_evidence will next gather (it is rate-limited)."""
-        return self._last_evidence + self.scenario.trust.evidence_period_s
+        return self.witness.next_at()
 
     def gather_evidence(self, now: float) -> None:
-        """Safety and consistency evidence about every seen peer (rate-limited)."""
-        config = self.scenario.trust
-        if now - self._last_evidence < config.evidence_period_s - 1e-9:
-            return
-        self._last_evidence = now
-        motions = {cid: tr.motion() for cid, tr in self.tracks.items()}
-        motions = {cid: m for cid, m in motions.items() if m is not None and now - m.stamp <= 0.2}
-        for peer, view in self.peers.items():
-            audit(view, self.tracks.get(peer), self._recorder(peer, now), self.counters)
-        for peer, motion in motions.items():
-            if peer == self.car.id:
-                continue
-            others = [(m, self.scenario.safety.breach_distance(self.radius(peer), self.radius(cid)))
-                      for cid, m in motions.items() if cid != peer]
-            if others:
-                # Does the peer keep the required clearance from every car it closes on?
-                self.trust.record(peer, SAFETY, *safety_verdict(motion, others, config), now)
-            view = self.peers.get(peer)
-            if view is not None:
-                view.velocities.append((motion.stamp, motion.velocity))
-                if view.accepted is not None:
-                    announced = view.accepted.state_at(np.array([motion.stamp]))[1][0]
-                    if self._turns_first(motion, announced) or self._guard_holds(peer, motion, motions, announced):
-                        view.held.append(motion.stamp)
-                mismatch = _acceleration_mismatch(view, self.scenario.control.replan_period_s + REPLAN_MARGIN_S,
-                                                  now - config.stale_after_s)
-                if mismatch is not None:
-                    s, f = graded(mismatch[0], config.consistency_tolerance_mps2)
-                    if f > 0 and _notice_lost(view, *mismatch[1:]):
-                        self.counters["consistency_excused_by_loss"] += 1
-                    else:
-                        self.trust.record(peer, CONSISTENCY, s, f, now)
-
-    def _guard_holds(self, peer: int, motion, motions: dict, announced: np.ndarray) -> bool:
-        """Would the proximity guard (agent.guard), fed the poses we see, hold ``peer``
-        below the speed of the plan it announced (``announced``: that plan's velocity
-        now)? Then it is slower than it said for safety's sake -- every honest car's guard
-        does that, unannounced."""
-        if not self.scenario.guard.enabled:
-            return False
-        others = [(*m.position, m.yaw, self.radius(cid)) for cid, m in motions.items() if cid != peer]
-        return capped_below(*motion.position, motion.yaw, self.radius(peer), others, self.scenario.guard,
-                            self.scenario.safety, self.sdf, float(np.linalg.norm(announced)) - GUARD_SLACK_MPS)
-
-    def _turns_first(self, motion, announced: np.ndarray) -> bool:
-        """Does the peer seen in ``motion`` face so far from where the plan it announced goes
-        (``announced``: that plan's velocity now) that its tracker (bridge.trajectory_controller,
-        TrackingConfig.turns_first) turns it on the spot before it drives? Every honest car
-        does that after a stop or a start facing elsewhere, unannounced (the plans are a
-        point's, the cars are not)."""
-        if np.linalg.norm(announced) < GUARD_SLACK_MPS:
-            return False
-        facing_off = math.remainder(math.atan2(announced[1], announced[0]) - motion.yaw, math.tau)
-        return self.scenario.tracking.turns_first(facing_off)
+        """Safety and consistency evidence about every seen peer, and the audits of their
+        plans (rate-limited: agent.evidence.Witness)."""
+        self.witness.gather(now, self.tracks, self.peers, self.trust, self.counters)
 
     # --- planning ---------------------------------------------------------------------------
 
@@ -325,7 +194,7 @@ class CarAgent:
             if (trust.standing_seen_s > 0 and planner.transparency and epsilon > self.epsilon_0(peer)
                     and self.trust.distrusted(peer, now)):
                 stands_at = self._seen_standing(peer, now)
-                if stands_at is not None:  # where it is seen, at eps_0 (module docstring, "Seen standing")
+                if stands_at is not None:  # where it is seen, at eps_0 (docs/design/trust.md, "Seen standing")
                     self.counters["peers_seen_standing"] += 1
                     plan, epsilon = standing(stands_at, now), self.epsilon_0(peer)
             constraints.append((peer, PeerConstraint(plan, epsilon, self._hold(peer))))
@@ -446,8 +315,8 @@ class CarAgent:
 
     def _keep(self, now: float, t0: float, on_plan: bool, request: PlanRequest, constraints: list,
               detour: np.ndarray | None) -> Outcome | None:
-        """The current plan, verified again from ``t0``, if it may be kept (module
-        docstring, "Kept plans"); else None: optimise. ``on_plan``: the car tracks it
+        """The current plan, verified again from ``t0``, if it may be kept (docs/design/planner.md,
+        "Kept plans"); else None: optimise. ``on_plan``: the car tracks it
         (:meth:`_start_state` starts from it; never before the departure)."""
         config = self.scenario.verify
         plan = self.plan
@@ -574,83 +443,3 @@ class CarAgent:
 
     def trust_in(self, peer: int, now: float) -> float:
         return self.trust.trust(peer, now)
-
-
-def _notice_lost(view: PeerView, t_old: float, t: float) -> bool:
-    """Could a plan of the peer's that we lost, that came too late to use, or that has
-    not reached us yet have told a change of mind in the window from ``t_old`` to ``t``
-    (stamped after it began, ANNOUNCED_MIN_S before it ended)? Not reached us yet: we
-    heard nothing stamped that late -- the peer's plans are held up in the network (a
-    TCP link under loss stalls for seconds) or it went silent."""
-    told_by = t - ANNOUNCED_MIN_S
-    return view.heard_until < told_by or any(earliest <= told_by and latest > t_old
-                                              for earliest, latest in view.lost)
-
-
-def _acceleration_mismatch(view: PeerView, fresh_s: float, until: float) -> tuple[float, float, float] | None:
-    """(|mean observed - mean announced acceleration|, window start, window end) over the
-    CONSISTENCY_WINDOW_S that ends at the last observation at or before ``until``, the
-    announcement being the newest
-    accepted plan the peer had made when the window began (by its stamp: a plan that
-    arrived late still tells what the peer meant then); None if that plan is older than
-    ``fresh_s`` then or there are not enough observations yet. The caller judges a
-    window only once every plan that could still be believed for it has had time to
-    arrive (``until`` = now - stale_after_s): a plan delayed in the network counts as if
-    it had come at once, never as a car that did not say what it did. A change of mind
-    announced in time is not inconsistency: if a plan made since (at least
-    ANNOUNCED_MIN_S ago) announced what the peer did from its stamp on, the smaller
-    mismatch counts -- a car that had to brake for a surprise and said so at its next
-    replan is consistent; one that says it brakes and does not is not."""
-    end = next(((t, v) for t, v in reversed(view.velocities) if t <= until + 1e-9), None)
-    if end is None:
-        return None
-    t, observed = end
-    start = next(((t_old, v_old) for t_old, v_old in reversed(view.velocities)
-                  if t - t_old >= CONSISTENCY_WINDOW_S - 1e-6), None)
-    if start is None:
-        return None
-    t_old, observed_old = start
-    announced = max(((stamp, p) for stamp, p in view.history if stamp <= t_old), key=lambda sp: sp[0],
-                    default=None)
-    if announced is None or t_old - announced[0] > fresh_s:
-        return None
-    # Its guard held it back, or it turned on the spot first, as honest cars do: then it
-    # is held only to going no faster than it said.
-    first_held = bisect.bisect_left(view.held, t_old)  # stamps in the order seen, so sorted
-    held = first_held < len(view.held) and view.held[first_held] <= t
-    measure = _overspeed if held else _acceleration_change
-    mismatch = measure(announced[1], t_old, observed_old, t, observed)
-    since = [(stamp, p) for stamp, p in view.history if t_old < stamp <= t - ANNOUNCED_MIN_S]
-    if since:
-        stamp, plan = max(since, key=lambda sp: sp[0])  # the latest made, whatever came first
-        then = _nearest(view.velocities, stamp)
-        if abs(then[0] - stamp) <= 0.5 * ANNOUNCED_MIN_S:
-            mismatch = min(mismatch, measure(plan, then[0], then[1], t, observed))
-    return mismatch, t_old, t
-
-
-def _nearest(velocities: deque, stamp: float) -> tuple[float, np.ndarray]:
-    """The (t, v) of ``velocities`` (sorted by t: appended as seen) nearest ``stamp``, the
-    earlier of two as near: ``min(velocities, key=|t - stamp|)`` by bisection."""
-    t = operator.itemgetter(0)
-    right = bisect.bisect_left(velocities, stamp, key=t)
-    if right == 0:
-        return velocities[0]
-    if right == len(velocities) or abs(velocities[right - 1][0] - stamp) <= abs(velocities[right][0] - stamp):
-        return velocities[bisect.bisect_left(velocities, velocities[right - 1][0], key=t)]  # the first of equals
-    return velocities[right]
-
-
-def _acceleration_change(plan, t_old: float, observed_old: np.ndarray, t: float, observed: np.ndarray) -> float:
-    """|observed - announced change of velocity| / window, m/s^2."""
-    v_then, v_now = plan.state_at(np.array([t_old, t]))[1]  # one interpolation for both ends
-    change = (observed - observed_old) - (v_now - v_then)
-    return float(np.linalg.norm(change)) / (t - t_old)
-
-
-def _overspeed(plan, t_old: float, observed_old: np.ndarray, t: float, observed: np.ndarray) -> float:
-    """How much faster than announced the car went by the window's end, per window
-    length (m/s^2, judged on the same tolerance): a car its guard held, or that turned
-    on the spot, is slower than its plan, and should be no faster."""
-    (v_now,) = plan.state_at(np.array([t]))[1]
-    return max(0.0, float(np.linalg.norm(observed) - np.linalg.norm(v_now))) / (t - t_old)

@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from trustfg.agent import car_agent
+from trustfg.agent import consistency, witness
 from trustfg.agent.car_agent import CarAgent
 from trustfg.agent.gp import Plan
 from trustfg.agent.messages import PlanMessage
@@ -196,7 +196,7 @@ def test_a_change_of_mind_whose_announcement_was_lost_is_not_inconsistency(inter
     intends = lambda s: plan_of(cruising if s < 3.0 else state, s)  # noqa: E731
     lost = lambda s: None if 3.0 - 1e-9 <= s < 3.4 else on_time(s)  # noqa: E731
     assert consistency_failures(intersection, intersection_sdf, seed, state, intends, lost) <= 0.25
-    monkeypatch.setattr(car_agent, "_notice_lost", lambda *window: False)
+    monkeypatch.setattr(witness, "notice_lost", lambda *window: False)
     assert consistency_failures(intersection, intersection_sdf, seed, state, intends, lost) >= 1.0
 
 
@@ -242,4 +242,4 @@ def test_the_observation_nearest_a_stamp_is_found_by_bisection_as_by_a_scan():
         stamps = sorted(rng.choice([rng.random(), round(rng.random(), 1)]) for _ in range(n))
         seen = deque(((t, i) for i, t in enumerate(stamps)), maxlen=64)
         stamp = rng.choice([rng.random(), round(rng.random() * 20) / 20, stamps[rng.randrange(n)], -1.0, 2.0])
-        assert car_agent._nearest(seen, stamp) == min(seen, key=lambda tv: abs(tv[0] - stamp))
+        assert consistency._nearest(seen, stamp) == min(seen, key=lambda tv: abs(tv[0] - stamp))

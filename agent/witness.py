@@ -1,0 +1,90 @@
+"""What a car makes of what it sees of its peers, once every evidence period.
+
+Every ``trust.evidence_period_s`` the witness audits each peer's plans against where the
+peer is seen (agent.audit), judges safety from the observed motion of every pair of cars
+(agent.evidence.safety_verdict: only the car that closes a gap is blamed) and consistency
+from the peer's accelerations against what it announced (agent.consistency). What it
+finds goes into the car's TrustBook. Pure: the car hands in what it saw and heard.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from .config import Scenario
+from .consistency import REPLAN_MARGIN_S, acceleration_mismatch, guard_holds, notice_lost, turns_first
+from .evidence import PeerView, audit, safety_verdict
+from .sightings import Track
+from .trust import CONSISTENCY, SAFETY, TrustBook, graded
+from .world import SignedDistanceField
+
+FRESH_MOTION_S = 0.2
+"""Only cars seen within this long count for safety and consistency evidence."""
+
+
+def recorder(trust: TrustBook, peer: int, now: float) -> Callable[[str, float, float], None]:
+    """A callback that records evidence about ``peer`` at ``now`` in ``trust``."""
+    return lambda dimension, success, failure: trust.record(peer, dimension, success, failure, now)
+
+
+@dataclass
+class Witness:
+    """One car's evidence gathering: rate-limited, with the car's scene and radii."""
+
+    own_id: int
+    scenario: Scenario
+    sdf: SignedDistanceField
+    radius: Callable[[int], float]
+    """A car's radius by its id."""
+    last_at: float = -np.inf
+    """When evidence was last gathered."""
+
+    def next_at(self) -> float:
+        """When :meth:`gather` will next gather."""
+        return self.last_at + self.scenario.trust.evidence_period_s
+
+    def gather(self, now: float, tracks: dict[int, Track], peers: dict[int, PeerView], trust: TrustBook,
+               counters: Counter) -> None:
+        """Audits, safety and consistency evidence about every seen peer (at most once a period)."""
+        config = self.scenario.trust
+        if now - self.last_at < config.evidence_period_s - 1e-9:
+            return
+        self.last_at = now
+        motions = {cid: tr.motion() for cid, tr in tracks.items()}
+        motions = {cid: m for cid, m in motions.items() if m is not None and now - m.stamp <= FRESH_MOTION_S}
+        for peer, view in peers.items():
+            audit(view, tracks.get(peer), recorder(trust, peer, now), counters)
+        for peer, motion in motions.items():
+            if peer == self.own_id:
+                continue
+            others = [(m, self.scenario.safety.breach_distance(self.radius(peer), self.radius(cid)))
+                      for cid, m in motions.items() if cid != peer]
+            if others:
+                # Does the peer keep the required clearance from every car it closes on?
+                trust.record(peer, SAFETY, *safety_verdict(motion, others, config), now)
+            view = peers.get(peer)
+            if view is not None:
+                self._judge_consistency(now, peer, view, motion, motions, trust, counters)
+
+    def _judge_consistency(self, now: float, peer: int, view: PeerView, motion, motions: dict, trust: TrustBook,
+                           counters: Counter) -> None:
+        """Note what the peer did now, and judge the window that has just become due."""
+        config = self.scenario.trust
+        view.velocities.append((motion.stamp, motion.velocity))
+        if view.accepted is not None:
+            announced = view.accepted.state_at(np.array([motion.stamp]))[1][0]
+            if turns_first(self.scenario, motion, announced) or guard_holds(
+                    self.scenario, self.sdf, self.radius, peer, motion, motions, announced):
+                view.held.append(motion.stamp)
+        mismatch = acceleration_mismatch(view, self.scenario.control.replan_period_s + REPLAN_MARGIN_S,
+                                         now - config.stale_after_s)
+        if mismatch is not None:
+            s, f = graded(mismatch[0], config.consistency_tolerance_mps2)
+            if f > 0 and notice_lost(view, *mismatch[1:]):
+                counters["consistency_excused_by_loss"] += 1
+            else:
+                trust.record(peer, CONSISTENCY, s, f, now)
