@@ -69,7 +69,7 @@ from ..cpu import Sections, Snapshot, Tally, breakdown, snapshot
 from ..program import command_parser, configured, stop_on_signals
 from .laps import Laps
 from .report import WaitingLog, status_counters, waiting_for, write_stats
-from .velocity_handle import CommandProcess
+from .velocity_handle import VelocityLoopHandle
 from .velocity_loop import Report
 
 log = logging.getLogger(__name__)
@@ -103,7 +103,7 @@ class CarProcess:
         self.inbox = messages.Inbox()
         self.frames: deque = deque(maxlen=4096)
         self.counters: Counter = Counter()
-        self.command = CommandProcess(scenario, car, self.sdf)
+        self.command = VelocityLoopHandle(scenario, car, self.sdf)
         self.command_report = Report()
         self.stuck = False
         self.state = Mode.WAITING.value

@@ -23,7 +23,7 @@ from .velocity_loop import REPORT_FIELDS, REPORT_INDEX, REPORT_KINDS, LoopSettin
 log = logging.getLogger("trustfg.fleet.car.velocity_loop")
 
 
-class CommandProcess:
+class VelocityLoopHandle:
     """The car process's handle on its command loop: start, feed, read, restart, close."""
 
     def __init__(self, scenario: Scenario, car: CarConfig, sdf: SignedDistanceField):

@@ -167,9 +167,9 @@ def name_process(name: str) -> None:
 
 
 @dataclass
-class CommandLoop:
+class VelocityLoop:
     """The command process's state; ``tick`` is one control step (:func:`serve` runs them
-    at the command rate; benchmarks/bench_command_tick.py times one car's)."""
+    at the command rate; benchmarks/bench_velocity_tick.py times one car's)."""
 
     scenario: Scenario
     car: CarConfig
@@ -271,7 +271,7 @@ class CommandLoop:
         self._publish("answers", self.counts["answers"] + 1)
 
 
-def connect_motive(loop: CommandLoop, stop: threading.Event) -> None:
+def connect_motive(loop: VelocityLoop, stop: threading.Event) -> None:
     """Reach Motive (retrying every ``control.retry_s``) and hand the client to the loop."""
     # A tick reads the newest pose: frames are taken from the socket and decoded when it
     # asks, not as they come (50 Hz of Motive's 120-360; the same pose, with its own
@@ -307,7 +307,7 @@ def serve(settings: LoopSettings, conn: Any, report: Any) -> None:
     name_process(f"trustfg-cmd-{car.id}")  # ps and top show it; the spawn command line does not say
     scheduling = realtime(scenario.control.realtime_priority)  # before any thread: they inherit it
     offset = car.clock_offset_s
-    loop = CommandLoop(scenario, car, report, clock=lambda: time.time() + offset, sdf=settings.sdf)
+    loop = VelocityLoop(scenario, car, report, clock=lambda: time.time() + offset, sdf=settings.sdf)
     loop._publish("realtime", float(scheduling != "normal"))
     connector = threading.Thread(target=connect_motive, args=(loop, stop), name=f"natnet-connect-{car.id}", daemon=True)
     connector.start()

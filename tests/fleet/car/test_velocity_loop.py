@@ -15,7 +15,7 @@ from trustfg.agent.gp import Plan
 from trustfg.agent.world import build_sdf
 from trustfg.bridge import natnet
 from trustfg.bridge.carlink import CommandReceiver, link_key
-from trustfg.fleet.car.velocity_handle import CommandProcess
+from trustfg.fleet.car.velocity_handle import VelocityLoopHandle
 from trustfg.fleet.car.velocity_loop import Permit, allowed
 from trustfg.fleet.launch.launcher import loopback_fleet
 from trustfg.fleet.launch.link_keys import with_link_keys
@@ -70,7 +70,7 @@ def loop_and_car(one_car):
     options = NatNetServerOptions(address="127.0.0.1", command_port=one_car.natnet.command_port, multicast=False,
                                   data_port=0, natnet_version=natnet.V3_1)
     host, port = car.link[len("udp://"):].rsplit(":", 1)
-    command = CommandProcess(one_car, car, build_sdf(one_car.world))
+    command = VelocityLoopHandle(one_car, car, build_sdf(one_car.world))
     with NatNetServer(options, bodies), CommandReceiver(car.id, (host, int(port)), key=link_key(car)) as link:
         command.start()
         try:
@@ -82,7 +82,7 @@ def loop_and_car(one_car):
 class Agent:
     """The car process's side, played by the test: grants a permit every 20 ms until paused."""
 
-    def __init__(self, command: CommandProcess, **permit):
+    def __init__(self, command: VelocityLoopHandle, **permit):
         self.command, self.permit = command, permit
         self.running, self.stop = threading.Event(), threading.Event()
         self.thread = threading.Thread(target=self._run, daemon=True)

@@ -1,6 +1,6 @@
 """The command loop's CPU per tick: what the 50 Hz loop of one car costs its process.
 
-    python benchmarks/bench_command_tick.py [--cars 8] [--seconds 10] [--runs 3]
+    python benchmarks/bench_velocity_tick.py [--cars 8] [--seconds 10] [--runs 3]
 
 One car's control step (fleet.car.velocity_loop: its own pose and the others' from a real
 NatNet client, tracking, the proximity guard against the other cars and the walls, the
@@ -31,7 +31,7 @@ from trustfg.agent.world import build_sdf
 from trustfg.bridge import natnet
 from trustfg.bridge.carlink import SOURCE_CAR_PROCESS, CommandReceiver, CommandSender, link_key
 from trustfg.fleet.car.ticker import ticks
-from trustfg.fleet.car.velocity_loop import REPORT_FIELDS, CommandLoop, Permit, connect_motive
+from trustfg.fleet.car.velocity_loop import REPORT_FIELDS, Permit, VelocityLoop, connect_motive
 from trustfg.fleet.launch.launcher import default_scenario, loopback_fleet
 from trustfg.fleet.launch.link_keys import with_link_keys
 from trustfg.mocap_sim.natnet_server import NatNetServer, NatNetServerOptions
@@ -60,7 +60,7 @@ def run_once(cars: int, seconds: float, keys: Path) -> tuple[list[float], float]
     rate = scenario.control.command_rate_hz
     spent: list[float] = []
     with NatNetServer(options, bodies), CommandReceiver(car.id, (host, int(port)), key=link_key(car)):
-        loop = CommandLoop(scenario, car, [0.0] * len(REPORT_FIELDS), clock=time.time, sdf=build_sdf(scenario.world))
+        loop = VelocityLoop(scenario, car, [0.0] * len(REPORT_FIELDS), clock=time.time, sdf=build_sdf(scenario.world))
         stop = threading.Event()
         connect_motive(loop, stop)
         loop.plan = plan
