@@ -11,7 +11,8 @@ Several attacks joined by ``+`` apply in the order named.
 Plan lies, each checked by a defence (docs/architecture.md, "Trust"):
 
     displaced      a fraction p of plans moved 0.4-0.8 m       lag-0 check, rejection
-    forged-stamp   stamps shift_s off, and displaced             clock estimate, future refusal
+    forged-future  stamps shift_s ahead, and displaced           clock estimate, future refusal
+    forged-past    stamps shift_s behind, and displaced          clock estimate, lag-0 check
     bias           0.14 m away from a victim, every plan         below the tolerance: the
                                                                  peer margin covers it
     false-future   true now, bends 0.6 m sideways later          audit of the plan's future
@@ -190,7 +191,7 @@ def _collude(liar, params, plan, stamp, now, own, seen):
 
 
 PLAN_LIES = {
-    "displaced": _displaced, "forged-stamp": _forged_stamp, "bias": _bias, "false-future": _false_future,
+    "displaced": _displaced, "forged-future": _forged_stamp, "forged-past": _forged_stamp, "bias": _bias, "false-future": _false_future,
     "false-yield": _false_yield, "on-off": _on_off, "replay": _replay, "collude": _collude,
 }
 

@@ -44,7 +44,25 @@ class ForgedStamp(Displaced):
     ``displaced`` besides."""
 
     shift_s: float = 0.2
-    """How far every plan's stamp is off the truth: > 0 in the future, < 0 in the past."""
+    """How far every plan's stamp is off the truth, s: > 0 in the future, < 0 in the past."""
+
+
+@dataclass(frozen=True)
+class ForgedFuture(ForgedStamp):
+    """Every plan message is stamped ``shift_s`` in the future (the plan's own times stay
+    true), and a fraction ``p`` is displaced as in ``displaced`` besides."""
+
+    shift_s: float = 0.2
+    """How far ahead of the truth every plan's stamp is, s (> 0)."""
+
+
+@dataclass(frozen=True)
+class ForgedPast(ForgedStamp):
+    """Every plan message is stamped ``-shift_s`` in the past (the plan's own times stay
+    true), and a fraction ``p`` is displaced as in ``displaced`` besides."""
+
+    shift_s: float = -0.2
+    """How far off the truth every plan's stamp is, s (< 0: in the past)."""
 
 
 @dataclass(frozen=True)
@@ -168,7 +186,8 @@ class Collude(Displaced):
 
 ATTACKS: dict[str, type] = {
     "displaced": Displaced,
-    "forged-stamp": ForgedStamp,
+    "forged-future": ForgedFuture,
+    "forged-past": ForgedPast,
     "bias": Bias,
     "false-future": FalseFuture,
     "false-yield": FalseYield,
@@ -236,6 +255,10 @@ def _check(params, path: str) -> None:
             raise ConfigError(f"{path}.{f.name}: must be >= 0")
         if f.name in ("stop_s", "ramp_s", "on_s") and value <= 0:
             raise ConfigError(f"{path}.{f.name}: must be > 0")
+    if isinstance(params, ForgedFuture) and params.shift_s <= 0:
+        raise ConfigError(f"{path}.shift_s: must be > 0 (a stamp in the future)")
+    if isinstance(params, ForgedPast) and params.shift_s >= 0:
+        raise ConfigError(f"{path}.shift_s: must be < 0 (a stamp in the past)")
     if hasattr(params, "offset_min_m") and params.offset_min_m > params.offset_max_m:
         raise ConfigError(f"{path}: offset_min_m must not exceed offset_max_m")
 

@@ -46,8 +46,8 @@ PARTNER = 3
 
 ATTACKS: dict[str, dict[int, AttackConfig]] = {
     "displaced": {LIAR: AttackConfig("displaced")},
-    "forged-future": {LIAR: AttackConfig("forged-stamp", {"shift_s": 0.2})},
-    "forged-past": {LIAR: AttackConfig("forged-stamp", {"shift_s": -0.2})},
+    "forged-future": {LIAR: AttackConfig("forged-future")},
+    "forged-past": {LIAR: AttackConfig("forged-past")},
     "bias": {LIAR: AttackConfig("bias")},
     "false-future": {LIAR: AttackConfig("false-future")},
     "false-yield": {LIAR: AttackConfig("false-yield")},

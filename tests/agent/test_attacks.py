@@ -50,12 +50,21 @@ def test_a_liar_is_deterministic_per_seed():
     assert np.array_equal(a, b)
 
 
-def test_forged_stamp_shifts_the_stamp_not_the_plan():
+def test_forged_stamps_shift_the_stamp_not_the_plan():
     plan = cruising_plan()
-    told, stamp = liar("forged-stamp", p=0.0, shift_s=0.2).plan(plan, NOW, None, {})
+    told, stamp = liar("forged-future", p=0.0).plan(plan, NOW, None, {})
     assert stamp == pytest.approx(NOW + 0.2) and told is plan
-    _, stamp = liar("forged-stamp", p=0.0, shift_s=-0.2).plan(plan, NOW, None, {})
+    _, stamp = liar("forged-past", p=0.0).plan(plan, NOW, None, {})
     assert stamp == pytest.approx(NOW - 0.2)
+    _, stamp = liar("forged-future", p=0.0, shift_s=0.5).plan(plan, NOW, None, {})
+    assert stamp == pytest.approx(NOW + 0.5)
+
+
+@pytest.mark.parametrize("name, shift_s", [("forged-future", -0.1), ("forged-future", 0.0), ("forged-past", 0.1)])
+def test_a_forged_stamp_on_the_wrong_side_is_refused(name, shift_s):
+    with pytest.raises(ConfigError, match="shift_s"):
+        AttackConfig(name, {"shift_s": shift_s}).validate("cars[0].attack")
+
 
 
 def test_bias_moves_every_plan_away_from_the_nearest_car():
