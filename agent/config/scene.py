@@ -66,8 +66,8 @@ class CarConfig:
     goal: tuple[float, float]
     """Where the car goes (x, y), in m."""
     route: tuple[tuple[float, float], ...] = ()
-    """Optional via points between start and goal (lane centre lines). They only seed the
-    first plan and estimate the path length; the optimiser is free to leave them."""
+    """Optional via points (x, y) between start and goal (lane centre lines), in m. They only
+    seed the first plan and estimate the path length; the optimiser is free to leave them."""
     start_heading_rad: float | None = None
     """Heading at the start; default: towards the first via point (or the goal)."""
     radius_m: float = 0.1
@@ -184,7 +184,7 @@ class SimConfig:
     """In-process fleet: the standard deviation of the Gaussian noise added to every pose
     observation, per axis (seeded)."""
     message_latency_s: float = 0.02
-    """In-process fleet: every fleet message arrives this late ..."""
+    """In-process fleet: every fleet message arrives this late, plus its jitter."""
     message_jitter_s: float = 0.0
     """In-process fleet: every fleet message arrives a further U(0, this) late, in order per
     sender and receiver (seeded per run)."""
@@ -200,7 +200,7 @@ class SimConfig:
     cruise_speed_range_mps: tuple[float, float] = (0.35, 0.45)
     """Each car's cruise speed is drawn from this range per seed."""
     replan_phase_max_s: float | None = None
-    """In-process fleet: each car's replans fall U(0, this) into the replan period (None:
+    """In-process fleet: each car's replans fall U(0, this) into the replan period (not set:
     the whole period, as car processes started one by one do). 0: every car replans at
     the same instants -- two cars set off together at the same speed then see each other
     alike, the tie no phase breaks (a door one car wide: both stand)."""
