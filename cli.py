@@ -37,6 +37,7 @@ COMMANDS = {
     "secure-config": ("trustfg.fleet.bus.security", "Zenoh mutual-TLS and access-control config for one fleet member"),
     "experiment": ("trustfg.fleet.experiments.paper", "run the paper's experiments (and the scenario bank) in-process"),
     "scenario": ("trustfg.fleet.sim.scene_gen", "generate a scene from a seed, or check a scene's starts and goals"),
+    "config": ("trustfg.agent.config.command_line", "the configuration: every key's reference, or a run's effective settings"),
 }
 
 
