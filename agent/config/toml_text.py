@@ -49,12 +49,10 @@ def effective_toml(scenario: Any, source: str) -> str:
     top-level keys, then every table, then the cars."""
     data = plain_data(scenario)
     data["cars"] = data.pop("cars")  # after the tables, as scene files have them
-    lines = [f"The effective configuration of {source}: trustfg's defaults, then the file; every key.",
-             "Not set, so left out (TOML has no null): " + (", ".join(unset_keys(scenario)) or "none") + ".",
-             "What each key does: trustfg config reference (docs/configuration.md)."]
-    header = "\n".join(textwrap.fill(line, width=96, initial_indent="# ", subsequent_indent="#   ",
-                                     break_on_hyphens=False, break_long_words=False) for line in lines)
-    return header + "\n\n" + toml_document(data)
+    unset = textwrap.fill("Not set, so left out (TOML has no null): " + (", ".join(unset_keys(scenario)) or "none")
+                          + ".", width=96, initial_indent="# ", subsequent_indent="#   ", break_on_hyphens=False)
+    return (f"# The effective configuration of {source}: trustfg's defaults, then the file; every key.\n{unset}\n"
+            "# What each key does: trustfg config reference (docs/configuration.md).\n\n" + toml_document(data))
 
 
 def unset_keys(scenario: Any) -> list[str]:
