@@ -15,4 +15,5 @@ A layer imports only layers listed above it here (agent at the bottom); ``trustf
 the command, sits on top of all. docs/architecture.md tells the whole story.
 """
 
-__version__ = "0.2.0"
+__version__ = "0.3.0"
+"""The release (CHANGELOG.md); pyproject.toml reads it from here."""

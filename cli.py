@@ -53,8 +53,13 @@ def main(argv: list[str] | None = None) -> int:
         print("usage: trustfg COMMAND [options]\n\ncommands:")
         for name, (_, text) in COMMANDS.items():
             print(f"  {name:<13} {text}")
-        print("\n'trustfg COMMAND --help' tells more.")
+        print("\n'trustfg COMMAND --help' tells more; 'trustfg --version' prints the version.")
         return 0 if argv else 2
+    if argv[0] in ("-V", "--version"):
+        from . import __version__
+
+        print(f"trustfg {__version__}")
+        return 0
     name, rest = argv[0], argv[1:]
     if name not in COMMANDS:
         print(f"trustfg: unknown command {name!r} (try 'trustfg --help')", file=sys.stderr)

@@ -10,6 +10,7 @@ never a traceback.
 from __future__ import annotations
 
 import argparse
+import re
 import signal
 import sys
 import threading
@@ -18,17 +19,36 @@ from typing import Callable, TypeVar
 T = TypeVar("T")
 
 
+_ROLE = re.compile(r":(?:class|func|meth|mod|attr|data|obj):`~?([^`]+)`")
+_LITERAL = re.compile(r"``([^`]+)``")
+_DEFAULT = re.compile(r"\(default(?!:) ")
+
+
+def plain(text: str) -> str:
+    """Help text as a terminal shows it: reStructuredText roles and literals become their
+    plain words (``:class:`~a.b.C``` -> C, two backquotes -> none)."""
+    text = _ROLE.sub(lambda m: m.group(1).rsplit(".", 1)[-1] if m.group(0).count("~") else m.group(1), text)
+    return _LITERAL.sub(r"\1", text)
+
+
+def _shown(default) -> str:
+    """A default as a user would type it: a list is its items separated by spaces."""
+    if isinstance(default, (list, tuple)):
+        return " ".join(str(item) for item in default)
+    return str(default).replace("%", "%%")
+
+
 class _HelpWithDefaults(argparse.RawDescriptionHelpFormatter):
-    """Keeps the description's lines; appends ``(default: X)`` to every option that has a
-    default and does not name it already."""
+    """Keeps the description's lines, in plain text; every option with a default ends its
+    help with ``(default: X)``, written one way in every command."""
 
     def _get_help_string(self, action: argparse.Action) -> str:
-        text = action.help or ""
+        text = _DEFAULT.sub("(default: ", plain(action.help or ""))
         default = action.default
-        if ("default" in text or action.required or default is None or default is False or default == argparse.SUPPRESS
-                or default == [] or isinstance(action, argparse._HelpAction)):
+        if ("(default" in text or action.required or default is None or default is False
+                or default == argparse.SUPPRESS or default == [] or isinstance(action, argparse._HelpAction)):
             return text
-        return f"{text} (default: %(default)s)"
+        return f"{text} (default: {_shown(default)})"
 
 
 class _OneLineErrors(argparse.ArgumentParser):
@@ -49,7 +69,9 @@ def command_parser(prog: str, doc: str | None, whole: bool = False, **kwargs) ->
     of the command module's docstring (``whole``: all of it), never cut mid-sentence; the
     help shows every default; a usage error is one line; an option is named whole."""
     description = (doc or "").strip() if whole else (doc or "").strip().split("\n\n")[0]
-    return _OneLineErrors(prog=prog, description=description, formatter_class=_HelpWithDefaults, **kwargs)
+    if "epilog" in kwargs and kwargs["epilog"]:
+        kwargs["epilog"] = plain(kwargs["epilog"])
+    return _OneLineErrors(prog=prog, description=plain(description), formatter_class=_HelpWithDefaults, **kwargs)
 
 
 def stop_on_signals(stop: threading.Event) -> threading.Event:

@@ -86,3 +86,57 @@ def test_a_shortened_option_is_a_usage_error_and_runs_nothing(argv, monkeypatch)
     with pytest.raises(SystemExit) as exit_:
         real(parser, argv[1:])
     assert exit_.value.code == 2
+
+
+MARKUP = ("``", ":class:`", ":func:`", ":mod:`", ":meth:`", ":attr:`")
+
+
+def parsers_of(name, monkeypatch) -> list[argparse.ArgumentParser]:
+    """A command's parser and its subcommands' (``trustfg scenario generate``), and for
+    ``experiment`` the parsers of the experiments with options of their own."""
+    found = [parser_of(name, monkeypatch)]
+    if name == "experiment":
+        from trustfg.fleet.experiments.paper import STUDIES
+
+        for study, (module, _) in STUDIES.items():
+            seen = {}
+            monkeypatch.setattr(argparse.ArgumentParser, "parse_args",
+                                lambda self, *a, **k: (seen.setdefault("parser", self), (_ for _ in ()).throw(Captured))[1])
+            with pytest.raises(Captured):
+                importlib.import_module(f"trustfg.fleet.experiments.{module}").main([])
+            found.append(seen["parser"])
+    for parser in list(found):
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                found += list(action.choices.values())
+    return found
+
+
+@pytest.mark.parametrize("name", list(COMMANDS))
+def test_help_is_plain_text_with_defaults_written_one_way(name, monkeypatch):
+    for parser in parsers_of(name, monkeypatch):
+        text = parser.format_help()
+        assert not [mark for mark in MARKUP if mark in text], f"{parser.prog}: markup in its help:\n{text}"
+        assert "(default " not in text.replace("\n", " "), f"{parser.prog}: '(default X)' instead of '(default: X)'"
+        assert parser.description, f"{parser.prog}: no description"
+
+
+def test_every_experiment_and_every_fault_case_has_a_line_of_help(monkeypatch):
+    from trustfg.fleet.experiments.paper import EXPERIMENTS, STUDIES
+    from trustfg.fleet.faultlab.matrix import CASES
+
+    experiments = parser_of("experiment", monkeypatch).format_help()
+    for name in [*EXPERIMENTS, "all", *STUDIES]:
+        assert f"\n  {name} " in experiments, name
+    faults = parser_of("faults", monkeypatch).format_help()
+    for name in CASES:
+        family = name.rsplit("-", 1)[0] + "-" if name.startswith("loss-") else name
+        assert f"\n    {family}" in faults, name
+    assert faults.count("partition") == 1  # the cases are listed once, with what each does
+
+
+def test_the_version_is_the_package_version():
+    from trustfg import __version__
+
+    done = subprocess.run([sys.executable, "-m", "trustfg", "--version"], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0 and done.stdout.strip() == f"trustfg {__version__}"

@@ -28,6 +28,7 @@ import json
 import logging
 import os
 import sys
+import textwrap
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -425,18 +426,34 @@ def write_study(folder: Path, report: dict, text: str) -> None:
     print(f"wrote {folder.resolve()} in {report['wall_time_s']:.0f} s")
 
 
-STUDIES = {"adversaries": "adversaries", "transparency-sweep": "transparency_sweep", "bank": "bank.runner",
-           "bank-journals": "bank.journals"}
-"""Experiments with their own options (``trustfg experiment NAME --help``), by module; not in "all"."""
+STUDIES = {
+    "adversaries": ("adversaries", "every attack against three fleets (trust on, off, wide), over many seeds"),
+    "transparency-sweep": ("transparency_sweep", "what trust buys against a liar, against a fleet careful with everyone"),
+    "bank": ("bank.runner", "the scenario bank: every scene, many seeds, our pipeline and the baselines"),
+    "bank-journals": ("bank.journals", "one table and figure from bank journals as they were recorded"),
+}
+"""Experiments with their own options (``trustfg experiment NAME --help``): module and what
+it measures; not in "all"."""
+
+
+def kinds_told() -> str:
+    """One entry for each kind of experiment, for the help."""
+    about = {name: experiment.question for name, experiment in EXPERIMENTS.items()}
+    about["all"] = f"the paper's experiments: {', '.join(PAPER)}"
+    about |= {name: text for name, (_, text) in STUDIES.items()}
+    lines = [textwrap.fill(text, 88, initial_indent=f"  {name:<20}", subsequent_indent=" " * 22)
+             for name, text in about.items()]
+    return ("experiments:\n" + "\n".join(lines) + f"\n\n{', '.join(STUDIES)} take options of their own: "
+            "trustfg experiment NAME --help")
 
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv and argv[0] in STUDIES:
-        return importlib.import_module(f".{STUDIES[argv[0]]}", __package__).main(argv[1:])
-    parser = command_parser("trustfg experiment", __doc__,
-                            epilog=f"also: {', '.join(STUDIES)} (each with its own --help)")
-    parser.add_argument("name", choices=[*EXPERIMENTS, "all", *STUDIES])
+        return importlib.import_module(f".{STUDIES[argv[0]][0]}", __package__).main(argv[1:])
+    parser = command_parser("trustfg experiment", __doc__, epilog=kinds_told())
+    parser.add_argument("name", choices=[*EXPERIMENTS, "all", *STUDIES], metavar="EXPERIMENT",
+                        help="which experiment, from the list below")
     parser.add_argument("--seed", type=int, default=0, help="first seed (default 0)")
     parser.add_argument("--seeds", type=int, default=20, help="number of seeds (default 20)")
     parser.add_argument("--out", type=Path, default=None,

@@ -399,10 +399,17 @@ def table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def cases_told() -> str:
+    """What each case does: the table of this module's docstring, the one place it is written."""
+    return "cases (" + __doc__.split("\nCases (", 1)[1].split("\n\nMeasured", 1)[0]
+
+
 def main(argv: list[str] | None = None) -> int:
-    parser = command_parser("trustfg faults", __doc__, epilog="Needs root: network namespaces and nftables.")
+    parser = command_parser("trustfg faults", __doc__,
+                            epilog=cases_told() + "\n\nNeeds root: network namespaces and nftables.")
     parser.add_argument("--seeds", type=int, default=3, help="runs per case (seeds 0..K-1)")
-    parser.add_argument("--cases", nargs="+", choices=list(CASES), default=list(CASES), help="the cases to run")
+    parser.add_argument("--cases", nargs="+", choices=list(CASES), default=list(CASES), metavar="CASE",
+                        help="the cases to run, from the list below (default: all)")
     parser.add_argument("--out", type=Path, default=None, help="folder for the runs (default runs/faults-<time>)")
     args = parser.parse_args(argv)
     reason = netem.available()

@@ -377,13 +377,17 @@ def _rotated_rect(centre: np.ndarray, w: float, h: float, angle: float) -> Obsta
 def main(argv: list[str] | None = None) -> int:
     parser = command_parser("trustfg scenario", __doc__)
     sub = parser.add_subparsers(dest="action", required=True)
-    gen = sub.add_parser("generate", help="make a scene from a seed")
-    gen.add_argument("--kind", required=True, choices=list(KINDS))
+    gen = sub.add_parser("generate", help="make a scene from a seed", formatter_class=parser.formatter_class,
+                         description="Make a scene from a seed: a map of KIND with CARS cars whose starts and "
+                                     "goals pass the scene check, written as a scenario file.")
+    gen.add_argument("--kind", required=True, choices=list(KINDS), help="the kind of map")
     gen.add_argument("--cars", type=int, required=True, help="number of cars (2..64; some kinds hold fewer)")
     gen.add_argument("--seed", type=int, default=0, help="draws the scene (default 0)")
     gen.add_argument("--name", default="", help="the scene's name (default: KIND-CARS)")
     gen.add_argument("--out", type=Path, required=True, help="the TOML file to write")
-    check = sub.add_parser("check", help="check that starts and goals are clear of obstacles and each other")
+    check = sub.add_parser("check", help="check that starts and goals are clear of obstacles and each other",
+                           formatter_class=parser.formatter_class,
+                           description="Check scenes: every start and goal clear of the obstacles and of each other.")
     check.add_argument("scenes", nargs="+", help="scenario files or shipped scene names")
     args = parser.parse_args(argv)
     if args.action == "generate":
