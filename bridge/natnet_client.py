@@ -7,7 +7,10 @@ Two pieces, as everywhere in trustfg:
   decoded, rejected by reason, frames dropped by gaps in frame numbers, stale/out-of-order),
   keeps a latest-value slot per rigid body id and calls an optional ``on_frame`` callback.
   Tests drive it with captured bytes.
-* :class:`NatNetClient` is the thin I/O layer, a context manager.
+* :class:`NatNetClient` is the thin I/O layer, a context manager: it owns the socket, the
+  thread and the unicast duties. Its options are in :mod:`bridge.natnet_options`, its
+  sockets and the handshake on the command port in :mod:`bridge.natnet_sockets`; the
+  names callers use are re-exported here.
 
 Modes (``NatNetClientOptions.multicast``):
 
@@ -64,150 +67,33 @@ what overflows it is lost, the newest first, and counted as ``dropped`` by the f
 from __future__ import annotations
 
 import logging
-import math
 import select
 import socket
-import struct
-import sys
 import threading
 import time
-from dataclasses import dataclass
 from typing import Callable
 
-from ..agent.config import ConfigError, NatNetConfig
 from . import natnet
-from .natnet import (
-    ConnectRequest,
-    Frame,
-    MessageId,
-    NatNetError,
-    ServerInfo,
-    Version,
-    supports_frames,
-)
+from .natnet import Frame, ServerInfo, Version, supports_frames
+from .natnet_options import NatNetClientOptions, client_options
 from .natnet_receiver import BodySample, FrameReceiver, NatNetStats
+from .natnet_sockets import (
+    RECV_BYTES,
+    NatNetConnectionError,
+    arrival,
+    command_address,
+    command_socket,
+    connect_packet,
+    handshake,
+    model_definitions,
+    multicast_socket,
+    stamp_arrivals,
+)
 
 __all__ = ["NatNetClientOptions", "NatNetClient", "NatNetConnectionError", "FrameReceiver",
            "BodySample", "NatNetStats", "client_options"]
 
 log = logging.getLogger(__name__)
-
-_RECV_BYTES = 65536
-
-_SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35 if sys.platform.startswith("linux") else None)
-"""Linux's SO_TIMESTAMPNS (SCM_TIMESTAMPNS in the control message; Python does not name it)."""
-_TIMESPEC = struct.Struct("@ll")
-"""struct timespec as SO_TIMESTAMPNS hands it: seconds and nanoseconds, native longs."""
-
-
-class NatNetConnectionError(ConnectionError):
-    """The client could not set up its link to the NatNet server (timeout, bad address, ...)."""
-
-
-_DEFAULTS = NatNetConfig()
-"""Motive's well-known ports and group, from the one place they are configured."""
-
-
-@dataclass(frozen=True)
-class NatNetClientOptions:
-    """Where and how to listen. Ports and addresses as in Motive's streaming pane.
-
-    ``natnet_version`` pins the frame layout (e.g. ``Version(3, 0)``); None learns it from
-    SERVERINFO. ``requested_version`` is sent in CONNECT to ask the server for a bitstream
-    version (NatNet 4 servers may honour it).
-    """
-
-    server_address: str = _DEFAULTS.server
-    command_port: int = _DEFAULTS.command_port
-    multicast: bool = _DEFAULTS.mode == "multicast"
-    multicast_group: str = _DEFAULTS.multicast_group
-    data_port: int = _DEFAULTS.data_port
-    local_address: str = _DEFAULTS.local_interface
-    handshake: bool = True
-    natnet_version: Version | None = None
-    requested_version: Version | None = None
-    client_name: str = "trustfg"
-    connect_timeout_s: float = 3.0
-    connect_retry_s: float = 0.5
-    keepalive_interval_s: float = 1.0
-    reconnect_after_s: float = 3.0
-    poll_timeout_s: float = 0.05
-    close_timeout_s: float = 2.0
-    receive_buffer_bytes: int = 1 << 20
-    frame_restart_threshold: int = 600
-    max_frame_rate_hz: float = 0.0
-    """Decode at most this many frames a second (0: every frame); see FrameReceiver."""
-    decode_on_read: bool = False
-    """Keep the newest frame undecoded until a reader asks for the latest samples; see
-    FrameReceiver (no ``on_frame`` then, and no ``max_frame_rate_hz``)."""
-    pull: bool = False
-    """No socket thread: readers take the waiting datagrams (module docstring, "Pull")."""
-
-    def __post_init__(self) -> None:
-        if self.multicast and not self.handshake and self.natnet_version is None:
-            raise ValueError("multicast without handshake needs natnet_version")
-        for name in ("connect_timeout_s", "connect_retry_s", "keepalive_interval_s",
-                     "reconnect_after_s", "poll_timeout_s", "close_timeout_s"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"{name} must be > 0")
-        if not (math.isfinite(self.max_frame_rate_hz) and self.max_frame_rate_hz >= 0):
-            raise ValueError("max_frame_rate_hz must be >= 0 (0: every frame)")
-        if self.decode_on_read and self.max_frame_rate_hz > 0:
-            raise ValueError("decode_on_read and max_frame_rate_hz exclude each other")
-
-
-def client_options(n: NatNetConfig) -> NatNetClientOptions:
-    """The client's options from a fleet config's ``[natnet]``; ConfigError for a version
-    the codec does not decode."""
-    if n.version and n.version not in natnet.STREAM_VERSIONS:
-        raise ConfigError(f"natnet.version: {n.version} is not one the bridge decodes "
-                          f"({', '.join(natnet.STREAM_VERSIONS)})")
-    version = Version.parse(n.version) if n.version else None
-    return NatNetClientOptions(
-        server_address=n.server, command_port=n.command_port, multicast=n.mode == "multicast",
-        multicast_group=n.multicast_group, data_port=n.data_port, local_address=n.local_interface,
-        natnet_version=version, handshake=version is None or n.mode == "unicast",
-    )
-
-
-def _reuse(sock: socket.socket) -> None:
-    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-    if hasattr(socket, "SO_REUSEPORT"):
-        try:
-            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEPORT, 1)
-        except OSError:  # defined but not supported by this kernel
-            pass
-
-
-def _receive_buffer(sock: socket.socket, nbytes: int) -> None:
-    try:
-        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, nbytes)
-    except OSError as exc:
-        log.debug("could not set SO_RCVBUF to %d: %s", nbytes, exc)
-
-
-def _stamp_arrivals(sock: socket.socket) -> int:
-    """Have the kernel stamp each datagram's arrival (SO_TIMESTAMPNS); the control-message
-    buffer size ``recvmsg`` needs for the stamp, 0 where the OS gives none."""
-    if _SO_TIMESTAMPNS is None or not hasattr(sock, "recvmsg"):
-        return 0
-    try:
-        sock.setsockopt(socket.SOL_SOCKET, _SO_TIMESTAMPNS, 1)
-    except OSError as exc:
-        log.debug("no kernel arrival stamps (SO_TIMESTAMPNS): %s", exc)
-        return 0
-    return socket.CMSG_SPACE(_TIMESPEC.size)
-
-
-def arrival(ancillary: list, mono: float, real: float) -> float:
-    """A datagram's arrival on the monotonic clock, from its SO_TIMESTAMPNS control message
-    (the wall clock's stamp, moved by how long ago it was: ``mono`` and ``real`` are the
-    two clocks read together); ``mono`` without one. Never later than ``mono``."""
-    for level, kind, data in ancillary:
-        if level == socket.SOL_SOCKET and kind == _SO_TIMESTAMPNS and len(data) >= _TIMESPEC.size:
-            seconds, nanoseconds = _TIMESPEC.unpack_from(data)
-            return min(mono, mono - (real - (seconds + nanoseconds * 1e-9)))
-    return mono
 
 
 class NatNetClient:
@@ -253,14 +139,14 @@ class NatNetClient:
             model_packet = None
             if o.multicast:
                 if o.handshake:
-                    with self._command_socket() as cmd:
-                        self._server_info = self._handshake(cmd)
-                        model_packet = self._model_definitions(cmd)
-                self._sock = self._multicast_socket()
+                    with command_socket(o) as cmd:
+                        self._server_info = handshake(cmd, o)
+                        model_packet = model_definitions(cmd, o)
+                self._sock = multicast_socket(o)
             else:
-                self._sock = self._command_socket()
+                self._sock = command_socket(o)
                 try:
-                    self._server_info = self._handshake(self._sock)
+                    self._server_info = handshake(self._sock, o)
                     self._sock.sendto(natnet.serialize(natnet.RequestModelDef()), self._server)
                 except BaseException:
                     self._sock.close()
@@ -281,7 +167,7 @@ class NatNetClient:
         now = time.monotonic()
         self._last_rx, self._next_keepalive, self._next_model = now, now + o.keepalive_interval_s, now
         if o.pull:
-            self._stamp_bytes = _stamp_arrivals(self._sock)
+            self._stamp_bytes = stamp_arrivals(self._sock)
             self._sock.setblocking(False)
         else:
             self._thread = threading.Thread(target=self._run, name="natnet-client", daemon=True)
@@ -388,10 +274,10 @@ class NatNetClient:
             while True:
                 try:
                     if self._stamp_bytes:
-                        data, ancillary, _, _ = sock.recvmsg(_RECV_BYTES, self._stamp_bytes)
+                        data, ancillary, _, _ = sock.recvmsg(RECV_BYTES, self._stamp_bytes)
                         received = arrival(ancillary, mono, real)
                     else:
-                        data, _ = sock.recvfrom(_RECV_BYTES)
+                        data, _ = sock.recvfrom(RECV_BYTES)
                         received = mono
                 except (BlockingIOError, InterruptedError):
                     break
@@ -409,111 +295,10 @@ class NatNetClient:
             self._duties(sock, mono)
         return taken
 
-    # -- sockets -----------------------------------------------------------------------
+    # -- the server ----------------------------------------------------------------------
     @property
     def _server(self) -> tuple[str, int]:
-        return self.options.server_address, self.options.command_port
-
-    def _command_socket(self) -> socket.socket:
-        """A socket of our own on an ephemeral port: no SO_REUSE* (see the module docstring)."""
-        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        try:
-            _receive_buffer(sock, self.options.receive_buffer_bytes)
-            sock.bind((self.options.local_address, 0))
-            sock.settimeout(self.options.poll_timeout_s)
-        except BaseException:
-            sock.close()
-            raise
-        return sock
-
-    def _multicast_socket(self) -> socket.socket:
-        o = self.options
-        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        try:
-            _reuse(sock)
-            _receive_buffer(sock, o.receive_buffer_bytes)
-            # POSIX: bind to the group so only its datagrams arrive; Windows cannot.
-            sock.bind(("" if sys.platform == "win32" else o.multicast_group, o.data_port))
-            membership = socket.inet_aton(o.multicast_group) + socket.inet_aton(o.local_address)
-            sock.setsockopt(socket.IPPROTO_IP, socket.IP_ADD_MEMBERSHIP, membership)
-            sock.settimeout(o.poll_timeout_s)
-        except OSError as exc:
-            sock.close()
-            raise NatNetConnectionError(
-                f"cannot join multicast group {o.multicast_group}:{o.data_port} on interface "
-                f"{o.local_address}: {exc}") from exc
-        return sock
-
-    def _connect_packet(self) -> bytes:
-        o = self.options
-        return natnet.serialize(ConnectRequest(o.client_name, Version(0, 1), natnet.NEWEST_LAYOUT,
-                                               requested_version=o.requested_version))
-
-    def _handshake(self, sock: socket.socket) -> ServerInfo:
-        """CONNECT until SERVERINFO arrives; frames arriving meanwhile are dropped."""
-        o = self.options
-        packet = self._connect_packet()
-        start = time.monotonic()
-        deadline = start + o.connect_timeout_s
-        next_send = start
-        while True:
-            now = time.monotonic()
-            if now >= deadline:
-                raise NatNetConnectionError(
-                    f"no SERVERINFO from NatNet server {o.server_address}:{o.command_port} "
-                    f"within {o.connect_timeout_s:.1f} s (is it running, streaming "
-                    f"{'multicast' if o.multicast else 'unicast'}, and is the address right?)")
-            if now >= next_send:
-                sock.sendto(packet, self._server)
-                next_send = now + o.connect_retry_s
-            sock.settimeout(max(1e-3, min(next_send, deadline) - now))
-            try:
-                data, _ = sock.recvfrom(_RECV_BYTES)
-            except socket.timeout:
-                continue
-            except OSError as exc:  # e.g. ICMP port unreachable reported on Windows
-                log.debug("NatNet handshake: %s", exc)
-                continue
-            if natnet.peek_message_id(data) != MessageId.SERVERINFO:
-                continue
-            try:
-                info = natnet.decode_server_info(natnet.unpack_header(data)[1])
-            except NatNetError as exc:
-                log.warning("NatNet handshake: bad SERVERINFO: %s", exc)
-                continue
-            sock.settimeout(o.poll_timeout_s)
-            self._check_mode(info)
-            log.info("NatNet server %s %s, NatNet %s", info.app_name, info.app_version,
-                     info.natnet_version)
-            return info
-
-    def _model_definitions(self, sock: socket.socket) -> bytes | None:
-        """Ask for MODELDEF on the command socket and wait (briefly) for it; None if none came."""
-        sock.sendto(natnet.serialize(natnet.RequestModelDef()), self._server)
-        deadline = time.monotonic() + min(1.0, self.options.connect_timeout_s)
-        while (left := deadline - time.monotonic()) > 0:
-            sock.settimeout(left)
-            try:
-                data, _ = sock.recvfrom(_RECV_BYTES)
-            except (socket.timeout, OSError):
-                continue
-            if natnet.peek_message_id(data) == MessageId.MODELDEF:
-                sock.settimeout(self.options.poll_timeout_s)
-                return data
-        log.warning("NatNet: no MODELDEF from the server; rigid bodies are known by id only")
-        return None
-
-    def _check_mode(self, info: ServerInfo) -> None:
-        c, o = info.connection, self.options
-        if c is None:
-            return
-        if c.multicast != o.multicast:
-            raise NatNetConnectionError(
-                f"NatNet server streams {'multicast' if c.multicast else 'unicast'} but the "
-                f"client is configured for {'multicast' if o.multicast else 'unicast'}")
-        if o.multicast and (c.multicast_address, c.data_port) != (o.multicast_group, o.data_port):
-            log.warning("NatNet server announces %s:%d, client listens on %s:%d",
-                        c.multicast_address, c.data_port, o.multicast_group, o.data_port)
+        return command_address(self.options)
 
     def _choose_version(self) -> Version:
         o, info = self.options, self._server_info
@@ -555,7 +340,7 @@ class NatNetClient:
                 self._next_keepalive = now + o.keepalive_interval_s
             if now - self._last_rx > o.reconnect_after_s:
                 log.warning("NatNet: nothing received for %.1f s, reconnecting", now - self._last_rx)
-                sock.sendto(self._connect_packet(), self._server)
+                sock.sendto(connect_packet(o), self._server)
                 self._last_rx = now
         except OSError as exc:
             log.debug("NatNet send: %s", exc)
@@ -565,7 +350,7 @@ class NatNetClient:
         assert sock is not None and receiver is not None
         while not self._stop.is_set():
             try:
-                data, _ = sock.recvfrom(_RECV_BYTES)
+                data, _ = sock.recvfrom(RECV_BYTES)
             except socket.timeout:
                 data = None
             except OSError as exc:
