@@ -272,85 +272,102 @@ def decode(payload: bytes) -> Message:
         _only(body, set())
         return ClockMessage(sender, seq, stamp)
     if kind == "stop":
-        _only(body, {"action", "cars", "trial"})
-        action = _str(body, "action", 16)
-        if action not in STOP_ACTIONS:
-            raise MessageError(f"stop.action: expected one of {', '.join(STOP_ACTIONS)}, got {action!r}")
-        cars = body.get("cars")
-        if not isinstance(cars, list) or len(cars) > MAX_PEERS:
-            raise MessageError(f"stop.cars must be an array of at most {MAX_PEERS} car ids")
-        if any(isinstance(c, bool) or not isinstance(c, int) or not 1 <= c <= 255 for c in cars):
-            raise MessageError(f"stop.cars: bad car id in {cars!r}")
-        return StopMessage(seq, stamp, action, tuple(cars), _int(body, "trial", 0, MAX_SEQ))
+        return _decode_stop(body, seq, stamp)
     if kind == "start":
-        _only(body, {"cars", "trial"})
-        trial = _int(body, "trial", 1, MAX_SEQ)
-        cars = body.get("cars")
-        if not isinstance(cars, dict):
-            raise MessageError("start.cars must be a map")
-        departures = {}
-        for car, entry in cars.items():
-            if isinstance(car, bool) or not isinstance(car, int) or not 1 <= car <= 255:
-                raise MessageError(f"start.cars: bad car id {car!r}")
-            if not isinstance(entry, dict):
-                raise MessageError(f"start.cars[{car}] must be a map")
-            _only(entry, {"depart", "cruise"}, common=False)
-            departures[car] = (_float(entry, "depart"), _float(entry, "cruise", 1e-3, 10.0))
-        return StartMessage(seq, stamp, trial, departures)
+        return _decode_start(body, seq, stamp)
     if kind == "plan":
-        _only(body, {"t0", "dt", "pos", "vel", "goal"}, optional=frozenset({"stuck", "deadlocks"}))
-        t0 = _float(body, "t0")
-        dt = _float(body, "dt", low=1e-4, high=60.0)
-        pos = _floats(body, "pos", 4, 2 * MAX_PLAN_STATES)
-        vel = _floats(body, "vel", 4, 2 * MAX_PLAN_STATES)
-        if len(pos) % 2 or len(pos) != len(vel):
-            raise MessageError(f"pos and vel must hold 2N floats each, got {len(pos)} and {len(vel)}")
-        goal = _floats(body, "goal", 2, 2)
-        plan = Plan(t0=t0, dt=dt, positions=np.array(pos).reshape(-1, 2),
-                    velocities=np.array(vel).reshape(-1, 2))
-        stuck = _bool(body, "stuck") if "stuck" in body else False
-        deadlocks = _int(body, "deadlocks", 0, MAX_DEADLOCKS) if "deadlocks" in body else 0
-        return PlanMessage(sender, seq, stamp, plan, (goal[0], goal[1]), stuck, deadlocks)
+        return _decode_plan(body, sender, seq, stamp)
     if kind == "trust":
-        _only(body, {"peers"})
-        peers_raw = body.get("peers")
-        if not isinstance(peers_raw, dict):
-            raise MessageError("trust.peers must be a map")
-        peers = {}
-        for peer, entry in peers_raw.items():
-            if isinstance(peer, bool) or not isinstance(peer, int) or not 1 <= peer <= 255:
-                raise MessageError(f"trust.peers: bad peer id {peer!r}")
-            if not isinstance(entry, dict):
-                raise MessageError(f"trust.peers[{peer}] must be a map")
-            _only(entry, {"a", "b", "tau", "trust", "eps"}, common=False)
-            alpha = _floats(entry, "a", 3, 3, low=0.0, high=1e9)
-            beta = _floats(entry, "b", 3, 3, low=0.0, high=1e9)
-            tau = _floats(entry, "tau", 3, 3, low=0.0, high=1.0)
-            peers[peer] = PeerTrust(tuple(alpha), tuple(beta), tuple(tau),
-                                    _float(entry, "trust", 0.0, 1.0),
-                                    _float(entry, "eps", 1e-6, 100.0))
-        return TrustReport(sender, seq, stamp, peers)
+        return _decode_trust(body, sender, seq, stamp)
     if kind == "pose":
         _only(body, {"x", "y", "yaw", "valid"})
         return PoseMessage(sender, seq, stamp, _float(body, "x"), _float(body, "y"),
                            _float(body, "yaw"), _bool(body, "valid"))
     if kind == "status":
-        _only(body, {"state", "replan_ms", "iterations", "at_goal", "counters", "trial"})
-        counters_raw = body.get("counters")
-        if not isinstance(counters_raw, dict) or len(counters_raw) > 64:
-            raise MessageError("status.counters must be a map of at most 64 entries")
-        counters = {}
-        for name, value in counters_raw.items():
-            if not isinstance(name, str) or len(name) > 64:
-                raise MessageError(f"status.counters: bad name {name!r}")
-            if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= MAX_SEQ:
-                raise MessageError(f"status.counters[{name}]: expected a count, got {value!r}")
-            counters[name] = value
-        return StatusMessage(sender, seq, stamp, _str(body, "state", 32),
-                             _float(body, "replan_ms", 0.0, 1e7),
-                             _int(body, "iterations", 0, 2**31), _bool(body, "at_goal"), counters,
-                             _int(body, "trial", 0, MAX_SEQ))
+        return _decode_status(body, sender, seq, stamp)
     raise MessageError(f"unknown message kind {kind!r}")
+
+
+def _decode_stop(body: dict, seq: int, stamp: float) -> StopMessage:
+    _only(body, {"action", "cars", "trial"})
+    action = _str(body, "action", 16)
+    if action not in STOP_ACTIONS:
+        raise MessageError(f"stop.action: expected one of {', '.join(STOP_ACTIONS)}, got {action!r}")
+    cars = body.get("cars")
+    if not isinstance(cars, list) or len(cars) > MAX_PEERS:
+        raise MessageError(f"stop.cars must be an array of at most {MAX_PEERS} car ids")
+    if any(isinstance(c, bool) or not isinstance(c, int) or not 1 <= c <= 255 for c in cars):
+        raise MessageError(f"stop.cars: bad car id in {cars!r}")
+    return StopMessage(seq, stamp, action, tuple(cars), _int(body, "trial", 0, MAX_SEQ))
+
+
+def _decode_start(body: dict, seq: int, stamp: float) -> StartMessage:
+    _only(body, {"cars", "trial"})
+    trial = _int(body, "trial", 1, MAX_SEQ)
+    cars = body.get("cars")
+    if not isinstance(cars, dict):
+        raise MessageError("start.cars must be a map")
+    departures = {}
+    for car, entry in cars.items():
+        if isinstance(car, bool) or not isinstance(car, int) or not 1 <= car <= 255:
+            raise MessageError(f"start.cars: bad car id {car!r}")
+        if not isinstance(entry, dict):
+            raise MessageError(f"start.cars[{car}] must be a map")
+        _only(entry, {"depart", "cruise"}, common=False)
+        departures[car] = (_float(entry, "depart"), _float(entry, "cruise", 1e-3, 10.0))
+    return StartMessage(seq, stamp, trial, departures)
+
+
+def _decode_plan(body: dict, sender: int, seq: int, stamp: float) -> PlanMessage:
+    _only(body, {"t0", "dt", "pos", "vel", "goal"}, optional=frozenset({"stuck", "deadlocks"}))
+    t0 = _float(body, "t0")
+    dt = _float(body, "dt", low=1e-4, high=60.0)
+    pos = _floats(body, "pos", 4, 2 * MAX_PLAN_STATES)
+    vel = _floats(body, "vel", 4, 2 * MAX_PLAN_STATES)
+    if len(pos) % 2 or len(pos) != len(vel):
+        raise MessageError(f"pos and vel must hold 2N floats each, got {len(pos)} and {len(vel)}")
+    goal = _floats(body, "goal", 2, 2)
+    plan = Plan(t0=t0, dt=dt, positions=np.array(pos).reshape(-1, 2), velocities=np.array(vel).reshape(-1, 2))
+    stuck = _bool(body, "stuck") if "stuck" in body else False
+    deadlocks = _int(body, "deadlocks", 0, MAX_DEADLOCKS) if "deadlocks" in body else 0
+    return PlanMessage(sender, seq, stamp, plan, (goal[0], goal[1]), stuck, deadlocks)
+
+
+def _decode_trust(body: dict, sender: int, seq: int, stamp: float) -> TrustReport:
+    _only(body, {"peers"})
+    peers_raw = body.get("peers")
+    if not isinstance(peers_raw, dict):
+        raise MessageError("trust.peers must be a map")
+    peers = {}
+    for peer, entry in peers_raw.items():
+        if isinstance(peer, bool) or not isinstance(peer, int) or not 1 <= peer <= 255:
+            raise MessageError(f"trust.peers: bad peer id {peer!r}")
+        if not isinstance(entry, dict):
+            raise MessageError(f"trust.peers[{peer}] must be a map")
+        _only(entry, {"a", "b", "tau", "trust", "eps"}, common=False)
+        alpha = _floats(entry, "a", 3, 3, low=0.0, high=1e9)
+        beta = _floats(entry, "b", 3, 3, low=0.0, high=1e9)
+        tau = _floats(entry, "tau", 3, 3, low=0.0, high=1.0)
+        peers[peer] = PeerTrust(tuple(alpha), tuple(beta), tuple(tau), _float(entry, "trust", 0.0, 1.0),
+                                _float(entry, "eps", 1e-6, 100.0))
+    return TrustReport(sender, seq, stamp, peers)
+
+
+def _decode_status(body: dict, sender: int, seq: int, stamp: float) -> StatusMessage:
+    _only(body, {"state", "replan_ms", "iterations", "at_goal", "counters", "trial"})
+    counters_raw = body.get("counters")
+    if not isinstance(counters_raw, dict) or len(counters_raw) > 64:
+        raise MessageError("status.counters must be a map of at most 64 entries")
+    counters = {}
+    for name, value in counters_raw.items():
+        if not isinstance(name, str) or len(name) > 64:
+            raise MessageError(f"status.counters: bad name {name!r}")
+        if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= MAX_SEQ:
+            raise MessageError(f"status.counters[{name}]: expected a count, got {value!r}")
+        counters[name] = value
+    return StatusMessage(sender, seq, stamp, _str(body, "state", 32), _float(body, "replan_ms", 0.0, 1e7),
+                         _int(body, "iterations", 0, 2**31), _bool(body, "at_goal"), counters,
+                         _int(body, "trial", 0, MAX_SEQ))
 
 
 # --- the receiving side's state: sender check, order and replay -------------------------------

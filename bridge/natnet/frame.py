@@ -146,81 +146,123 @@ def decode_frame(payload: bytes | bytearray | memoryview, version: Version, *,
 
 
 def _decode_frame(buf: bytes, end: int, lay: _Layout, full: bool) -> Frame:
-    sizes = lay.sizes
+    """The sections in the order the module docstring lists them, each read by its own step."""
     if end < 4:
         raise NatNetError(f"truncated FRAMEOFDATA: {end} bytes", "truncated")
     (frame_number,) = _I32.unpack_from(buf, 0)
+    marker_sets, off = _marker_set_section(buf, 4, end, lay, full)
+    legacy, off = _legacy_marker_section(buf, off, end, lay, full)
+    bodies, off = _rigid_body_section(buf, off, end, lay)
+    skeletons: tuple[Skeleton, ...] = ()
+    if lay.skeletons:
+        skeletons, off = _skeleton_section(buf, off, end, lay, full)
+    assets: tuple[Asset, ...] = ()
+    if lay.assets:
+        assets, off = _asset_section(buf, off, end, full)
+    labeled: tuple[LabeledMarker, ...] = ()
+    if lay.labeled:
+        labeled, off = _labeled_marker_section(buf, off, end, lay, full)
+    plates: tuple[AnalogDevice, ...] = ()
+    if lay.force_plates:
+        plates, off = _analog_section(buf, off, end, lay.sizes, full, "force plate")
+    devices: tuple[AnalogDevice, ...] = ()
+    if lay.devices:
+        devices, off = _analog_section(buf, off, end, lay.sizes, full, "device")
+    (timecode, subframe, timestamp, mid, received, transmit, prec_s, prec_frac, params), off = \
+        _suffix(buf, off, lay)
+    if timestamp * 0.0 != 0.0:
+        raise NatNetError(f"frame {frame_number} has a non-finite timestamp", "non_finite")
+    rest = end - off
+    if rest != 0 and rest != 4:  # 4: Motive's end-of-data tag
+        raise NatNetError(f"{rest} unexpected bytes after the frame suffix (is this really "
+                          "the stream's NatNet version?)", "trailing_bytes")
+    return Frame(frame_number, bodies, timestamp, timecode, subframe, mid, received, transmit,
+                 prec_s, prec_frac, params, marker_sets, legacy, skeletons, assets, labeled,
+                 plates, devices)
 
-    # marker sets
-    n, off = _count(buf, 4, end, 5, "marker set")
-    if sizes:
-        off, stop = _section_end(buf, off, end, n, 5, "marker set")
-        if full:
-            marker_sets, off = _marker_sets(buf, off, stop, n, True)
-            _check_section(off, stop, "marker set")
-        else:
-            marker_sets, off = (), stop
-    else:
-        marker_sets, off = _marker_sets(buf, off, end, n, full)
 
-    # legacy ("other") markers
+# Each section step takes the offset of the section's count and returns what it kept (empty
+# unless ``full``) and the offset after the section. With ``lay.sizes`` (NatNet >= 4.1) the
+# section's byte size is checked against what its items take, and a skipped section is
+# skipped by that size.
+
+
+def _marker_set_section(buf: bytes, off: int, end: int, lay: _Layout,
+                        full: bool) -> tuple[tuple[MarkerSet, ...], int]:
+    n, off = _count(buf, off, end, 5, "marker set")
+    if not lay.sizes:
+        return _marker_sets(buf, off, end, n, full)
+    off, stop = _section_end(buf, off, end, n, 5, "marker set")
+    if not full:
+        return (), stop
+    marker_sets, off = _marker_sets(buf, off, stop, n, True)
+    _check_section(off, stop, "marker set")
+    return marker_sets, off
+
+
+def _legacy_marker_section(buf: bytes, off: int, end: int, lay: _Layout,
+                           full: bool) -> tuple[tuple[Vec3, ...], int]:
+    """The "other" (unlabeled) markers: ``n`` vec3 of 12 bytes."""
     n, off = _count(buf, off, end, 12, "legacy marker")
-    if sizes:
+    if lay.sizes:
         off, stop = _section_end(buf, off, end, n, 12, "legacy marker")
         _check_section(off + 12 * n, stop, "legacy marker")
     legacy = tuple(_VEC3.iter_unpack(buf[off:off + 12 * n])) if full and n else ()
-    off += 12 * n
+    return legacy, off + 12 * n
 
-    # rigid bodies (always decoded)
+
+def _rigid_body_section(buf: bytes, off: int, end: int,
+                        lay: _Layout) -> tuple[tuple[RigidBody, ...], int]:
+    """The rigid bodies, always decoded (the client's one use of a frame)."""
     n, off = _count(buf, off, end, lay.rb_min_bytes, "rigid body")
-    if sizes:
-        off, stop = _section_end(buf, off, end, n, _RB_BYTES, "rigid body")
-        bodies, off = _rigid_bodies_v3(buf, off, n)
-        _check_section(off, stop, "rigid body")
-    else:
-        bodies, off = _rigid_body_list(buf, off, end, n, lay)
+    if not lay.sizes:
+        return _rigid_body_list(buf, off, end, n, lay)
+    off, stop = _section_end(buf, off, end, n, _RB_BYTES, "rigid body")
+    bodies, off = _rigid_bodies_v3(buf, off, n)
+    _check_section(off, stop, "rigid body")
+    return bodies, off
 
-    skeletons: tuple[Skeleton, ...] = ()
-    if lay.skeletons:
-        n, off = _count(buf, off, end, 8, "skeleton")
-        if sizes:
-            off, stop = _section_end(buf, off, end, n, 8, "skeleton")
-            if full:
-                skeletons, off = _skeletons(buf, off, stop, n, lay, True)
-                _check_section(off, stop, "skeleton")
-            else:
-                off = stop
-        else:
-            skeletons, off = _skeletons(buf, off, end, n, lay, full)
 
-    assets: tuple[Asset, ...] = ()
-    if lay.assets:
-        n, off = _count(buf, off, end, 12, "asset")
-        off, stop = _section_end(buf, off, end, n, 12, "asset")
-        if full:
-            assets, off = _assets(buf, off, stop, n, True)
-            _check_section(off, stop, "asset")
-        else:
-            off = stop
+def _skeleton_section(buf: bytes, off: int, end: int, lay: _Layout,
+                      full: bool) -> tuple[tuple[Skeleton, ...], int]:
+    n, off = _count(buf, off, end, 8, "skeleton")
+    if not lay.sizes:
+        return _skeletons(buf, off, end, n, lay, full)
+    off, stop = _section_end(buf, off, end, n, 8, "skeleton")
+    if not full:
+        return (), stop
+    skeletons, off = _skeletons(buf, off, stop, n, lay, True)
+    _check_section(off, stop, "skeleton")
+    return skeletons, off
 
-    labeled: tuple[LabeledMarker, ...] = ()
-    if lay.labeled:
-        size = lay.labeled_bytes
-        n, off = _count(buf, off, end, size, "labeled marker")
-        if sizes:
-            off, stop = _section_end(buf, off, end, n, size, "labeled marker")
-            _check_section(off + n * size, stop, "labeled marker")
-        labeled, off = _labeled_markers(buf, off, n, lay, full)
 
-    plates: tuple[AnalogDevice, ...] = ()
-    if lay.force_plates:
-        plates, off = _analog_section(buf, off, end, sizes, full, "force plate")
+def _asset_section(buf: bytes, off: int, end: int, full: bool) -> tuple[tuple[Asset, ...], int]:
+    """Assets exist from NatNet 4.1 only, so their section always carries its byte size."""
+    n, off = _count(buf, off, end, 12, "asset")
+    off, stop = _section_end(buf, off, end, n, 12, "asset")
+    if not full:
+        return (), stop
+    assets, off = _assets(buf, off, stop, n, True)
+    _check_section(off, stop, "asset")
+    return assets, off
 
-    devices: tuple[AnalogDevice, ...] = ()
-    if lay.devices:
-        devices, off = _analog_section(buf, off, end, sizes, full, "device")
 
-    # suffix
+def _labeled_marker_section(buf: bytes, off: int, end: int, lay: _Layout,
+                            full: bool) -> tuple[tuple[LabeledMarker, ...], int]:
+    """Labeled markers: ``n`` items of ``lay.labeled_bytes`` each (the size depends on the version)."""
+    size = lay.labeled_bytes
+    n, off = _count(buf, off, end, size, "labeled marker")
+    if lay.sizes:
+        off, stop = _section_end(buf, off, end, n, size, "labeled marker")
+        _check_section(off + n * size, stop, "labeled marker")
+    return _labeled_markers(buf, off, n, lay, full)
+
+
+def _suffix(buf: bytes, off: int, lay: _Layout) -> tuple[tuple, int]:
+    """The fields after the sections, as the Frame orders them: (timecode, subframe,
+    timestamp, mid-exposure, data received, transmit, precision s, precision fraction,
+    params), each 0 where the version has none; and the offset after them. A short
+    buffer raises ``struct.error`` (decode_frame reports it as truncated)."""
     mid = received = transmit = prec_s = prec_frac = params = 0
     if lay.hires:
         if lay.precision:
@@ -244,15 +286,7 @@ def _decode_frame(buf: bytes, end: int, lay: _Layout, full: bool) -> Frame:
         if lay.frame_params:
             (params,) = _U16.unpack_from(buf, off)
             off += 2
-    if timestamp * 0.0 != 0.0:
-        raise NatNetError(f"frame {frame_number} has a non-finite timestamp", "non_finite")
-    rest = end - off
-    if rest != 0 and rest != 4:  # 4: Motive's end-of-data tag
-        raise NatNetError(f"{rest} unexpected bytes after the frame suffix (is this really "
-                          "the stream's NatNet version?)", "trailing_bytes")
-    return Frame(frame_number, bodies, timestamp, timecode, subframe, mid, received, transmit,
-                 prec_s, prec_frac, params, marker_sets, legacy, skeletons, assets, labeled,
-                 plates, devices)
+    return (timecode, subframe, timestamp, mid, received, transmit, prec_s, prec_frac, params), off
 
 
 def encode_frame(frame: Frame, version: Version) -> bytes:
