@@ -9,8 +9,8 @@ kernels OpenBLAS picks for the CPU, from the vector instruction sets numpy dispa
 loops to, and from the CPU numba compiles for. So a journal entry names its environment
 (:func:`digest` of :func:`environment`) beside its commit: two runs of one seed are the
 same run only when both match (``trustfg experiment bank --recheck K`` reruns K of a
-journal's runs here and says which came out the same; docs/bank-runs/README.md how often
-they did on another machine).
+journal's runs here and says which came out the same; docs/results/scenario-bank.md,
+"Repeating a run", how often they did on another machine).
 """
 
 from __future__ import annotations
