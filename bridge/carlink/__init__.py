@@ -15,10 +15,14 @@ Three pieces, each documented where it lives:
 * :mod:`.direct` -- one E_STOP datagram with the standard library alone (``trustfg stop``'s
   first, before the rest loads).
 * :mod:`.keys` -- where a car's link key comes from (its key file) and how one is made.
+* :mod:`.conformance` -- ``trustfg carlink-test``: a car probed over UDP, rule by rule of
+  :mod:`.receiver` (its probes and socket in :mod:`.conformance_probes`). Not re-exported.
 
 Imports point one way: ``codec``, ``answer``, ``receiver``, ``keys``, ``direct`` and
 ``link`` use ``frame``; ``answer``, ``receiver`` and ``link`` use ``codec``; ``receiver``
-uses ``answer``; ``link`` uses ``answer``, ``receiver``, ``keys`` and ``direct``.
+uses ``answer``; ``link`` uses ``answer``, ``receiver``, ``keys`` and ``direct``;
+``conformance_probes`` uses ``frame``, ``answer``, ``direct``, ``keys`` and ``receiver``'s
+defaults, and ``conformance`` uses it.
 Everything public is re-exported here, so callers import from ``trustfg.bridge.carlink``;
 the re-exports load on first use (PEP 562), so that importing :mod:`.frame`, :mod:`.keys`
 or :mod:`.direct` alone stays quick: ``trustfg stop`` sends its first E_STOPs with them.
