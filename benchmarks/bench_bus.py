@@ -28,7 +28,8 @@ import zenoh
 from trustfg.agent import messages
 from trustfg.agent.config import BusConfig
 from trustfg.agent.gp import Plan
-from trustfg.fleet.bus.session import FleetBus, zenoh_config
+from trustfg.fleet.bus.session import FleetBus
+from trustfg.fleet.bus.zenoh_setup import zenoh_config
 from trustfg.fleet.launch.ports import free_port
 
 FLEET = "bench"

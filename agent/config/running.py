@@ -202,7 +202,7 @@ class BusConfig:
     (deploy/zenoh/) used as the base -- TLS, access control -- that the fields here
     complete: endpoints are added to the file's; mode and multicast scouting come from the
     file when it sets them, and a value here that contradicts the file is an error
-    (fleet.bus.session.zenoh_config). Without multicast scouting a session opens at once (no
+    (fleet.bus.zenoh_setup.zenoh_config). Without multicast scouting a session opens at once (no
     scouting delay).
     """
 

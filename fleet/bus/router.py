@@ -24,7 +24,7 @@ import zenoh
 
 from ...agent.config import Scenario
 from ..program import command_parser, stop_on_signals
-from .session import zenoh_runtime_threads
+from .zenoh_setup import zenoh_runtime_threads
 
 log = logging.getLogger(__name__)
 

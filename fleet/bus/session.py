@@ -1,50 +1,26 @@
 """The fleet bus: one Zenoh session per process, its publishers and subscribers, and queues.
 
-What is published under which key, and how reliably, is fleet.bus.key_exprs' table.
+What is published under which key, and how reliably, is fleet.bus.key_exprs' table; the
+zenoh.Config the session opens with comes from fleet.bus.zenoh_setup.
 
 Zenoh callbacks only hand ``(sender, kind, payload)`` to a bounded queue (the oldest is
 dropped, and counted, when it is full) -- they never decode, block or call into the
 agent. The owner drains the queue in its own loop and decodes there (agent.messages).
 The sender id is taken from the key, so the decoder can refuse a message whose ``id``
 disagrees with it. ``close()`` undeclares everything and closes the session; nothing in
-here blocks on a Zenoh channel, so shutdown never hangs.
-
-A subscription Zenoh lost is declared again. Four peers opening their sessions to each
-other at once sometimes end with one of them never getting one kind from one other, or
-none at all, though the other's liveliness token reached it and it reaches the other
-(this machine, Zenoh 1.10, a script of bare sessions under load: 4 of 76 starts with
-every peer dialling every other, 1 of 76 with only the higher id dialling; in CI a car
-drove a whole run without one peer's plans, and in another without anything from one
-peer after the first seconds). So ``drain()`` also watches (:func:`silent_kinds`): a car
-whose liveliness token is up but that was not heard on kind K for ``SILENT_S`` has K
-subscribed again, at most every ``RESUBSCRIBE_EVERY_S`` (counted:
-``resubscribed_<kind>``). A kind the car sends ten times a second (``FREQUENT``: plans,
-poses) is subscribed again sooner, once the car is heard on another kind ``BEHIND_S``
-after it was last heard on this one (or first heard at all): at 50 % loss the redeclared
-subscription itself takes a second or two to reach the peer, and three seconds of
-silence first left a car without a peer's plans for 4.5 s of a run (CI, loss-50). A car
-that only stopped publishing K, or is cut off behind a partition, costs a redeclaration
-every few seconds, no more. A car whose token never reached us but that we hear is
-watched too (:func:`present`).
-
-The watch also tells when this process hears nothing from any live car for ``DEAF_S``
-(a deaf spell: a warning with the session's links when it starts and when it ends,
-counted as ``deaf_spells`` and ``deaf_ms_max``): what stalls a whole process's receiving,
-not one subscription, as Zenoh's lingering TCP closes did (RX_THREADS).
+here blocks on a Zenoh channel, so shutdown never hangs. ``drain()`` also watches: a kind
+a live car is not heard on is subscribed again (:func:`silent_kinds`), and hearing no
+live car at all for ``DEAF_S`` is told as a deaf spell.
 """
 
 from __future__ import annotations
 
-import json
 import logging
 import math
-import os
-import re
 import threading
 import time
 from collections import Counter, deque
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Callable
 
 import zenoh
@@ -53,18 +29,11 @@ import zenoh.ext as zext
 from ...agent import messages
 from ...agent.config import BusConfig
 from .key_exprs import ALIVE, CLOCK, HEARTBEAT, KINDS, OPERATOR, START, STOP, every_car, fleet_key, key, parse_key
+from .zenoh_setup import BusError, config_value, zenoh_config, zenoh_runtime_threads
 
 log = logging.getLogger(__name__)
 
 CLOSE_TIMEOUT_S = 2.0
-RX_THREADS = 8
-"""Zenoh's receiving threads per process (its default is 2). Zenoh drops a TCP link that
-could not flush for a quarter of its lease, and the dropped socket lingers in close() --
-SO_LINGER of 10 s, compiled into Zenoh -- inside a receiving thread while unsent data
-waits. At 50 % loss two such closes at once left a car hearing nothing from any peer for
-2-10 s (gdb: both rx threads in close()). A blocked thread sleeps: more of them cost no
-CPU, and the others go on receiving. Upstream: eclipse-zenoh/zenoh#1101 (a dropped TCP
-link blocks its runtime thread for the linger; open, no setting for it in Zenoh 1.10)."""
 WATCH_PERIOD_S = 0.5
 SILENT_S = 3.0
 """With the control defaults a car publishes every kind at least every 0.5 s (status and
@@ -105,7 +74,20 @@ def silent_kinds(heard: dict[tuple[int, str], float], alive: dict[int, bool], ki
     SILENT_S (counted from the session's opening for a car never heard on it), or -- a
     ``frequent`` kind -- that were heard on another kind BEHIND_S after they were last heard
     on it (or, never heard on it, after ``first[car]``: when they were first heard at all;
-    a car only starting has no plan to send for its first few tenths of a second)."""
+    a car only starting has no plan to send for its first few tenths of a second).
+
+    The bus subscribes to such a kind again, at most every ``RESUBSCRIBE_EVERY_S``
+    (counted: ``resubscribed_<kind>``). Four peers opening their sessions to each other at
+    once sometimes end with one of them never getting one kind from one other, or none at
+    all, though the other's liveliness token reached it and it reaches the other (this
+    machine, Zenoh 1.10, a script of bare sessions under load: 4 of 76 starts with every
+    peer dialling every other, 1 of 76 with only the higher id dialling; in CI a car drove
+    a whole run without one peer's plans, and in another without anything from one peer
+    after the first seconds). A frequent kind (plans, poses) is subscribed again sooner:
+    at 50 % loss the redeclared subscription itself takes a second or two to reach the
+    peer, and three seconds of silence first left a car without a peer's plans for 4.5 s
+    of a run (CI, loss-50). A car that only stopped publishing K, or is cut off behind a
+    partition, costs a redeclaration every few seconds, no more."""
     out: dict[str, list[int]] = {}
     first = first or {}
     for car, up in alive.items():
@@ -119,93 +101,6 @@ def silent_kinds(heard: dict[tuple[int, str], float], alive: dict[int, bool], ki
             if silent or behind:
                 out.setdefault(kind, []).append(car)
     return out
-
-
-class BusError(RuntimeError):
-    """The Zenoh session could not be opened or configured."""
-
-
-def zenoh_config(bus: BusConfig, extra_listen: tuple[str, ...] = ()) -> zenoh.Config:
-    """A zenoh.Config from our BusConfig, on top of the file ``bus.zenoh_config`` if given.
-
-    The file is the base and ``[bus]`` completes it, never silently overrides it: endpoints
-    are added to the file's lists; ``mode``, multicast scouting and its interface and
-    ``max_links`` come from the file when it sets them, and a ``[bus]`` value that differs
-    both from the file's and from its own default is an error naming both (BusError).
-    Zenoh's config answers its own default for a setting a file leaves out, so a file
-    value equal to Zenoh's default counts as not set: a lab's file that did not mention
-    ``max_links`` left every car one link per peer (Zenoh's 1), no UDP link beside the
-    TCP one, and plans queued behind TCP's retransmissions. To ask for Zenoh's default
-    value, set it in ``[bus]``."""
-    try:
-        try:
-            config = zenoh.Config.from_file(str(Path(bus.zenoh_config))) if bus.zenoh_config else zenoh.Config()
-        except Exception as exc:
-            raise BusError(f"bad Zenoh configuration in bus.zenoh_config {bus.zenoh_config}: {_said(exc)}") from exc
-        default, zenoh_default = BusConfig(), zenoh.Config()
-        for path, field_name in (("mode", "mode"), ("scouting/multicast/enabled", "multicast_scouting"),
-                                 ("scouting/multicast/interface", "multicast_interface"),
-                                 ("transport/unicast/max_links", "max_links")):
-            ours = getattr(bus, field_name)
-            theirs = _get(config, path) if bus.zenoh_config else None
-            if theirs is not None and theirs == _get(zenoh_default, path):
-                theirs = None  # not set by the file, or set to what it would be anyway
-            if theirs is None:
-                if field_name != "multicast_interface" or ours:
-                    config.insert_json5(path, json.dumps(ours))
-            elif theirs != ours:
-                if ours != getattr(default, field_name):
-                    raise BusError(f"bus.{field_name} = {ours!r} contradicts {path} = {theirs!r} in "
-                                   f"{bus.zenoh_config}: set it in one place")
-                log.info("bus.%s: %r from %s", field_name, theirs, bus.zenoh_config)
-        if _get(config, "scouting/multicast/enabled") is False and _get(config, "scouting/delay") is None:
-            # Zenoh waits scouting/delay (500 ms) in open() for peers to scout; with listed
-            # endpoints there is nothing to scout (and an e-stop must not wait half a second).
-            config.insert_json5("scouting/delay", "0")
-        listen = _merged(_get(config, "listen/endpoints"), [*bus.listen, *extra_listen])
-        fixed = [e for e in listen if re.search(r":0(?:$|[?#])", e)]
-        if fixed:
-            raise BusError(f"listen endpoint {fixed[0]}: port 0 would be a port nobody can be told; name one")
-        if listen:
-            config.insert_json5("listen/endpoints", json.dumps(listen))
-        connect = [e for e in _merged(_get(config, "connect/endpoints"), list(bus.connect))
-                   if e not in listen]  # a fleet-wide list may name us
-        if connect:
-            config.insert_json5("connect/endpoints", json.dumps(connect))
-    except BusError:
-        raise
-    except Exception as exc:  # zenoh raises ZError and others for bad files or values
-        raise BusError(f"bad Zenoh configuration: {_said(exc)}") from exc
-    return config
-
-
-def zenoh_runtime_threads() -> None:
-    """Ask for RX_THREADS receiving threads, unless ZENOH_RUNTIME says otherwise. Zenoh
-    reads the variable when its runtime starts: call before the process's first session."""
-    os.environ.setdefault("ZENOH_RUNTIME", f"(rx: (worker_threads: {RX_THREADS}))")
-
-
-def _said(exc: Exception) -> str:
-    """Zenoh's message on one line, without the Rust source location it ends with."""
-    return " ".join(line.strip() for line in str(exc).split(" at /")[0].splitlines() if line.strip())
-
-
-def _get(config: zenoh.Config, path: str):
-    """A value of a Zenoh config (None when unset)."""
-    return json.loads(config.get_json(path))
-
-
-def _merged(theirs, ours: list[str]) -> list[str]:
-    """The file's endpoints, then ours. Per-mode lists (a map) are Zenoh's defaults, which
-    ours replace as before."""
-    if isinstance(theirs, dict):
-        theirs = []
-    merged = []
-    for endpoint in [*(theirs or []), *ours]:
-        if endpoint not in merged:
-            merged.append(endpoint)
-    return merged
-
 
 @dataclass(frozen=True)
 class Received:
@@ -288,7 +183,7 @@ class FleetBus:
             raise BusError(f"cannot open a Zenoh session: {exc}") from exc
         session = self._session
         fleet = self.fleet
-        listening = _get(config, "listen/endpoints")
+        listening = config_value(config, "listen/endpoints")
         if isinstance(listening, list) and listening:
             log.info("%s: Zenoh listening on %s", f"car {self.car_id}" if self.car_id else "operator/observer",
                      ", ".join(listening))
@@ -397,7 +292,9 @@ class FleetBus:
 
     def _watch_deafness(self, heard: dict[tuple[int, str], float], alive: dict[int, bool], now: float) -> None:
         """Nothing from any live car for DEAF_S: a deaf spell, counted (``deaf_spells``,
-        ``deaf_ms_max``) and told with the session's links when it starts and ends."""
+        ``deaf_ms_max``) and told with the session's links when it starts and ends. It is
+        what stalls a whole process's receiving, not one subscription, as Zenoh's lingering
+        TCP closes did (fleet.bus.zenoh_setup.RX_THREADS)."""
         last = max([self._opened, *(at for (car, _), at in heard.items() if car in alive)])  # cars, not the operator
         up = sum(alive.values())
         if up and now - last > DEAF_S and self._deaf_since is None:

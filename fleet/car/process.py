@@ -64,7 +64,8 @@ from ...bridge import natnet
 from ...bridge.carlink import link_key
 from ...bridge.natnet_client import NatNetClient, NatNetConnectionError, client_options, fresh_pose
 from ..bus.key_exprs import HEARD_BY_CARS
-from ..bus.session import BusError, FleetBus, Received, zenoh_config
+from ..bus.session import FleetBus, Received
+from ..bus.zenoh_setup import BusError, zenoh_config
 from ..cpu import Sections, Snapshot, Tally, breakdown, snapshot
 from ..program import command_parser, configured, stop_on_signals
 from .laps import Laps

@@ -14,7 +14,8 @@ from tests.conftest import ROOT, wait_for
 from trustfg.agent import messages
 from trustfg.agent.config import BusConfig
 from trustfg.fleet.bus.security import secure_config
-from trustfg.fleet.bus.session import FleetBus, zenoh_config
+from trustfg.fleet.bus.session import FleetBus
+from trustfg.fleet.bus.zenoh_setup import zenoh_config
 from trustfg.fleet.launch.ports import free_port
 
 pytestmark = pytest.mark.realtime

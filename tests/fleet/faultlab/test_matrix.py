@@ -22,7 +22,7 @@ REJOIN_WITHIN_S = 10.0  # a restarted car process back on the bus: it came back 
 # cores, is a speed of this machine, reported as time_to_rejoin_s by `trustfg faults`, not a timed test)
 TRUST_FLOOR = 0.6  # below the prior (2/3) only by evidence of misbehaviour, never by silence
 PLAN_AGE_P99_MS = 1000  # a car's view of every peer's plan at 50 % loss (best-effort plans;
-# at 50 % it held in 24 of 24 runs once Zenoh got more receiving threads, fleet/bus.py RX_THREADS)
+# at 50 % it held in 24 of 24 runs once Zenoh got more receiving threads, fleet/bus/zenoh_setup.py RX_THREADS)
 PLAN_AGE_P50_MS_AT_50 = 300  # at 50 %: fresh most of the time (TCP alone: p50 8.5 s)
 
 
