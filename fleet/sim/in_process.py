@@ -54,137 +54,175 @@ def simulate(scenario: Scenario, seed: int, sdf: SignedDistanceField | None = No
     """Run the scenario to completion (every car at its goal) or to sim.timeout_s.
     ``record_trust=False`` leaves the trust matrices over time out of the record (they
     cost O(n^2) trust fusions every RECORD_TRUST_PERIOD_S: a third of a 16-car run)."""
-    sim = scenario.sim
-    sdf = sdf or build_sdf(scenario.world)
-    rng = np.random.default_rng(seed)
-    cars = list(scenario.cars)
-    n = len(cars)
-    ids = [c.id for c in cars]
-    depart, cruise = draw_departures(scenario, rng)
-    control = scenario.control
-    step_s = 1.0 / control.command_rate_hz
-    spread = control.replan_period_s if sim.replan_phase_max_s is None else sim.replan_phase_max_s
-    phase = rng.uniform(0.0, spread, n)
-    noise_rng = np.random.default_rng([seed, 7])
+    fleet = _Fleet(scenario, seed, sdf, keep_plans, record_trust)
+    for k in range(-fleet.settle_steps, fleet.steps):
+        if fleet.step(k):
+            break
+    return fleet.record()
 
-    def minds(departures) -> list[CarAgent]:
-        return [CarAgent(car=c, scenario=scenario, sdf=sdf, depart_at=float(departures[i]),
-                         cruise_speed_mps=float(cruise[i]), rng=np.random.default_rng([seed, c.id]))
-                for i, c in enumerate(cars)]
 
-    # The cars stand sim.settle_s before the go, as trustfg sim's do: minds that wait
-    # (depart_at = inf), each replaced at the go by one that drives and carries over what
-    # its predecessor learnt (CarAgent.carry_over, as the car process does at a start).
-    settle_steps = int(round(sim.settle_s / step_s))
-    agents = minds(np.full(n, math.inf) if settle_steps else depart)
-    waited: list[CarAgent] = []  # the minds that stood the wait (their liars' lies are the run's too)
-    inboxes = [messages.Inbox() for _ in cars]
-    vehicles = [VehicleState(c.start[0], c.start[1], c.start_heading) for c in cars]
+class _Fleet:
+    """One run of :func:`simulate`: the cars set up from the seed, stepped through the
+    world one command period at a time (:meth:`step`), and what was recorded (:meth:`record`)."""
 
-    clock = np.array([c.clock_offset_s for c in cars])  # each car's clock minus the fleet's
-    network = Network(sim, n, np.random.default_rng([seed, 11]))
+    def __init__(self, scenario: Scenario, seed: int, sdf: SignedDistanceField | None,
+                 keep_plans: bool, record_trust: bool):
+        """Set up the cars: departures, speeds and phases drawn from ``seed``, minds, bodies
+        and the network, and the empty record."""
+        self.scenario, self.seed, self.keep_plans, self.record_trust = scenario, seed, keep_plans, record_trust
+        sim = scenario.sim
+        self.sdf = sdf or build_sdf(scenario.world)
+        rng = np.random.default_rng(seed)
+        self.cars = cars = list(scenario.cars)
+        self.n = n = len(cars)
+        self.ids = [c.id for c in cars]
+        self.depart, self.cruise = draw_departures(scenario, rng)
+        self.control = control = scenario.control
+        self.step_s = step_s = 1.0 / control.command_rate_hz
+        spread = control.replan_period_s if sim.replan_phase_max_s is None else sim.replan_phase_max_s
+        phase = rng.uniform(0.0, spread, n)
+        self.noise_rng = np.random.default_rng([seed, 7])
 
-    steps = int(math.ceil(sim.timeout_s / step_s)) + 1
-    times, states = [], []
-    trust_times, trust_rows, transparency_rows, epsilon_rows = [], [], [], []
-    arrived: list[float | None] = [None] * n
-    guard_limited = [0] * n
-    plan_log: list = []
-    # Replans and reports keep their phase to the go through the wait.
-    next_replan = phase - math.ceil(sim.settle_s / control.replan_period_s) * control.replan_period_s
-    next_report = rng.uniform(0.0, control.trust_report_period_s, n)
-    next_report -= math.ceil(sim.settle_s / control.trust_report_period_s) * control.trust_report_period_s
-    next_trust_record = -math.floor(sim.settle_s / RECORD_TRUST_PERIOD_S + 1e-9) * RECORD_TRUST_PERIOD_S
+        # The cars stand sim.settle_s before the go, as trustfg sim's do: minds that wait
+        # (depart_at = inf), each replaced at the go by one that drives and carries over what
+        # its predecessor learnt (CarAgent.carry_over, as the car process does at a start).
+        self.settle_steps = int(round(sim.settle_s / step_s))
+        self.agents = self._minds(np.full(n, math.inf) if self.settle_steps else self.depart)
+        self.waited: list[CarAgent] = []  # the minds that stood the wait (their liars' lies are the run's too)
+        self.inboxes = [messages.Inbox() for _ in cars]
+        self.vehicles = [VehicleState(c.start[0], c.start[1], c.start_heading) for c in cars]
 
-    for k in range(-settle_steps, steps):
-        t = k * step_s
+        self.clock = np.array([c.clock_offset_s for c in cars])  # each car's clock minus the fleet's
+        self.network = Network(sim, n, np.random.default_rng([seed, 11]))
+
+        self.steps = int(math.ceil(sim.timeout_s / step_s)) + 1
+        self.times, self.states = [], []
+        self.trust_times, self.trust_rows, self.transparency_rows, self.epsilon_rows = [], [], [], []
+        self.arrived: list[float | None] = [None] * n
+        self.guard_limited = [0] * n
+        self.plan_log: list = []
+        # Replans and reports keep their phase to the go through the wait.
+        self.next_replan = phase - math.ceil(sim.settle_s / control.replan_period_s) * control.replan_period_s
+        self.next_report = rng.uniform(0.0, control.trust_report_period_s, n)
+        self.next_report -= math.ceil(sim.settle_s / control.trust_report_period_s) * control.trust_report_period_s
+        self.next_trust_record = -math.floor(sim.settle_s / RECORD_TRUST_PERIOD_S + 1e-9) * RECORD_TRUST_PERIOD_S
+
+    def _minds(self, departures) -> list[CarAgent]:
+        return [CarAgent(car=c, scenario=self.scenario, sdf=self.sdf, depart_at=float(departures[i]),
+                         cruise_speed_mps=float(self.cruise[i]), rng=np.random.default_rng([self.seed, c.id]))
+                for i, c in enumerate(self.cars)]
+
+    def step(self, k: int) -> bool:
+        """Step k of the world (k < 0: the wait before the go); whether every car is at its
+        goal and still."""
+        t = k * self.step_s
         going = t >= -1e-9
-        if k == 0 and settle_steps:  # the go
-            waited, agents = agents, minds(depart)
-            for i, agent in enumerate(agents):
-                agent.carry_over(waited[i])
-        # 1. Deliver due messages through each receiver's inbox (decode + order/replay filter).
-        own = t + clock  # every car's own reading of the time
-        for sender, receiver, payload in network.due(t):
-            message = inboxes[receiver].accept(payload, key_sender=ids[sender])
+        if k == 0 and self.settle_steps:  # the go
+            self.waited, self.agents = self.agents, self._minds(self.depart)
+            for i, agent in enumerate(self.agents):
+                agent.carry_over(self.waited[i])
+        own = t + self.clock  # every car's own reading of the time
+        self._deliver(t, own)
+        seen = self._observe(own)
+        self._think(t, own, going)
+        if self.record_trust and t + 1e-9 >= self.next_trust_record:  # trust from the start of the wait
+            self.next_trust_record += RECORD_TRUST_PERIOD_S
+            self.trust_times.append(t)
+            tr, tp, ep = _trust_snapshot(self.agents, self.ids, own)
+            self.trust_rows.append(tr)
+            self.transparency_rows.append(tp)
+            self.epsilon_rows.append(ep)
+        if not going:
+            return False  # the cars stand; their motion's record starts at the go
+        return self._move(t, own, seen)
+
+    def _deliver(self, t: float, own: np.ndarray) -> None:
+        """1. Deliver due messages through each receiver's inbox (decode + order/replay filter)."""
+        for sender, receiver, payload in self.network.due(t):
+            message = self.inboxes[receiver].accept(payload, key_sender=self.ids[sender])
             if message is not None:
-                agents[receiver].receive(message, own[receiver])
-        # 2. Everyone sees everyone (mocap), with noise.
-        seen = np.empty((n, n, 3))  # seen[j, i]: car i as car j sees it
-        for i, state in enumerate(vehicles):
-            noisy = noise_rng.normal(0.0, sim.observation_noise_m, (n, 2))
+                self.agents[receiver].receive(message, own[receiver])
+
+    def _observe(self, own: np.ndarray) -> np.ndarray:
+        """2. Everyone sees everyone (mocap), with noise; seen[j, i]: car i as car j sees it."""
+        n, ids = self.n, self.ids
+        seen = np.empty((n, n, 3))
+        for i, state in enumerate(self.vehicles):
+            noisy = self.noise_rng.normal(0.0, self.scenario.sim.observation_noise_m, (n, 2))
             seen[:, i] = np.column_stack([state.x + noisy[:, 0], state.y + noisy[:, 1], np.full(n, state.yaw)])
-            for j, agent in enumerate(agents):
+            for j, agent in enumerate(self.agents):
                 agent.observe(own[j], ids[i], *seen[j, i])
-        # 3. Evidence, replanning, reports.
-        for i, agent in enumerate(agents):
+        return seen
+
+    def _think(self, t: float, own: np.ndarray, going: bool) -> None:
+        """3. Evidence, replanning, reports."""
+        control, network, ids = self.control, self.network, self.ids
+        for i, agent in enumerate(self.agents):
             agent.gather_evidence(own[i])
-            if t + 1e-9 >= next_replan[i]:
-                next_replan[i] += control.replan_period_s
+            if t + 1e-9 >= self.next_replan[i]:
+                self.next_replan[i] += control.replan_period_s
                 if going:
                     agent.replan(own[i])
                 elif (motion := agent.tracks[ids[i]].motion()) is not None:
                     agent.plan = standing(motion.position, own[i])  # waiting: as fleet.car.process
-                if keep_plans and agent.plan is not None:
-                    plan_log.append((t, i, agent.plan))
+                if self.keep_plans and agent.plan is not None:
+                    self.plan_log.append((t, i, agent.plan))
                 outgoing = agent.plan_message(own[i])
                 if outgoing is not None:
                     network.publish(i, messages.encode(outgoing), t)
-            if t + 1e-9 >= next_report[i]:
-                next_report[i] += control.trust_report_period_s
+            if t + 1e-9 >= self.next_report[i]:
+                self.next_report[i] += control.trust_report_period_s
                 network.publish(i, messages.encode(agent.trust_message(own[i])), t)
-        if record_trust and t + 1e-9 >= next_trust_record:  # trust from the start of the wait
-            next_trust_record += RECORD_TRUST_PERIOD_S
-            trust_times.append(t)
-            tr, tp, ep = _trust_snapshot(agents, ids, own)
-            trust_rows.append(tr)
-            transparency_rows.append(tp)
-            epsilon_rows.append(ep)
-        if not going:
-            continue  # the cars stand; their motion's record starts at the go
-        # 4. Record, then control and move.
-        times.append(t)
-        states.append([[s.x, s.y, s.yaw, s.v, s.omega] for s in vehicles])
-        for i, agent in enumerate(agents):
+
+    def _move(self, t: float, own: np.ndarray, seen: np.ndarray) -> bool:
+        """4. Record, then control and move; whether every car is at its goal and still."""
+        scenario, cars, vehicles, ids, n = self.scenario, self.cars, self.vehicles, self.ids, self.n
+        self.times.append(t)
+        self.states.append([[s.x, s.y, s.yaw, s.v, s.omega] for s in vehicles])
+        for i, agent in enumerate(self.agents):
             state = vehicles[i]
-            if arrived[i] is None and math.hypot(state.x - cars[i].goal[0], state.y - cars[i].goal[1]) <= scenario.arrival_radius_m:
-                arrived[i] = t
+            if self.arrived[i] is None and \
+                    math.hypot(state.x - cars[i].goal[0], state.y - cars[i].goal[1]) <= scenario.arrival_radius_m:
+                self.arrived[i] = t
             me = agent.tracks[ids[i]].motion()
             others = [(*seen[i, j], cars[j].radius_m) for j in range(n) if j != i]
             command = drive(agent.plan, own[i], (me.position[0], me.position[1], me.yaw),
-                            own[i] >= depart[i] and not agent.at_goal, lambda: others, cars[i].radius_m, scenario, sdf)
-            guard_limited[i] += command.guard_limited
-            vehicles[i] = vehicle_step(state, command.v, command.omega, step_s, scenario.vehicle)
-        if all(a is not None for a in arrived) and all(abs(s.v) < 1e-3 for s in vehicles):
-            break
+                            own[i] >= self.depart[i] and not agent.at_goal, lambda: others, cars[i].radius_m,
+                            scenario, self.sdf)
+            self.guard_limited[i] += command.guard_limited
+            vehicles[i] = vehicle_step(state, command.v, command.omega, self.step_s, scenario.vehicle)
+        return all(a is not None for a in self.arrived) and all(abs(s.v) < 1e-3 for s in vehicles)
 
-    def minds_of(i: int) -> list[CarAgent]:
+    def _lying_minds(self, i: int) -> list[CarAgent]:
         """Car i's minds that lie, in order: the one that waited, the one that drove."""
-        return [mind for mind in (*waited[i:i + 1], agents[i]) if mind.liar is not None]
+        return [mind for mind in (*self.waited[i:i + 1], self.agents[i]) if mind.liar is not None]
 
-    return RunRecord(
-        seed=seed,
-        car_ids=ids,
-        radii=[c.radius_m for c in cars],
-        times=np.array(times),
-        states=np.array(states),
-        arrived_at=arrived,
-        depart_at=[float(d) for d in depart],
-        trust_times=np.array(trust_times),
-        trust=np.array(trust_rows),
-        transparency=np.array(transparency_rows),
-        epsilon=np.array(epsilon_rows),
-        replan_ms=[list(a.replan_ms) for a in agents],
-        counters=[dict(a.counters) | {f"trust_{k}": v for k, v in a.trust.counters.items()}
-                  | ({f"attack_{k}": v for k, v in a.liar.counters.items()} if a.liar else {})
-                  | {"guard_limited": guard_limited[i]} | network.counters(i) for i, a in enumerate(agents)],
-        inbox=[dict(box.dropped) | {f"accepted_{k}": v for k, v in box.accepted.items()} for box in inboxes],
-        final_plans=[(a.plan.positions.copy(), a.plan.velocities.copy()) if a.plan is not None else
-                     (np.zeros((0, 2)), np.zeros((0, 2))) for a in agents],
-        plan_log=plan_log,
-        first_lie_s=[_first_lie(minds_of(i)) for i in range(n)],
-        told=[[told for mind in minds_of(i) for told in mind.liar.told] for i in range(n)],
-    )
+    def record(self) -> RunRecord:
+        """What the run recorded, with every car's counters and its last plan."""
+        agents, network, n = self.agents, self.network, self.n
+        return RunRecord(
+            seed=self.seed,
+            car_ids=self.ids,
+            radii=[c.radius_m for c in self.cars],
+            times=np.array(self.times),
+            states=np.array(self.states),
+            arrived_at=self.arrived,
+            depart_at=[float(d) for d in self.depart],
+            trust_times=np.array(self.trust_times),
+            trust=np.array(self.trust_rows),
+            transparency=np.array(self.transparency_rows),
+            epsilon=np.array(self.epsilon_rows),
+            replan_ms=[list(a.replan_ms) for a in agents],
+            counters=[dict(a.counters) | {f"trust_{k}": v for k, v in a.trust.counters.items()}
+                      | ({f"attack_{k}": v for k, v in a.liar.counters.items()} if a.liar else {})
+                      | {"guard_limited": self.guard_limited[i]} | network.counters(i) for i, a in enumerate(agents)],
+            inbox=[dict(box.dropped) | {f"accepted_{k}": v for k, v in box.accepted.items()} for box in self.inboxes],
+            final_plans=[(a.plan.positions.copy(), a.plan.velocities.copy()) if a.plan is not None else
+                         (np.zeros((0, 2)), np.zeros((0, 2))) for a in agents],
+            plan_log=self.plan_log,
+            first_lie_s=[_first_lie(self._lying_minds(i)) for i in range(n)],
+            told=[[told for mind in self._lying_minds(i) for told in mind.liar.told] for i in range(n)],
+        )
 
 
 def _first_lie(minds: list[CarAgent]) -> float | None:
