@@ -202,103 +202,141 @@ def run(scenario: Scenario, out: Path, seed: int = 0, timeout_s: float | None = 
     t_go = None
     crashed_early: list[str] = []
     try:
-        mocap = processes.start("mocap-sim", ["mocap-sim", "--config", str(config_path), "--ground-truth",
-                                              str(out / "ground_truth.csv"), "--natnet-version", natnet_version,
-                                              "--command-log", str(out / "commands.csv"),
-                                              "--seed", str(seed), *mocap_args],
-                                out / "mocap_sim.log", stdout=subprocess.PIPE)
-        wait_ready(mocap, stop)
-        if dashboard_port is not None:
-            port = dashboard_port or free_port()
-            processes.start("dashboard", ["dashboard", "--config", str(config_path), "--port", str(port),
-                                          "--listen", f"tcp/{infra_ip}:{free_port()}"], out / "dashboard.log")
-            print(f"dashboard: http://127.0.0.1:{port}/", flush=True)
-        for car in scenario.cars:
-            processes.start(f"car {car.id}", RunContext(scenario, out, processes, config_path, 0.0).car_args(car.id),
-                            out / f"car_{car.id}.log")
+        _start_children(processes, scenario, out, config_path, seed=seed, natnet_version=natnet_version,
+                        mocap_args=mocap_args, stop=stop, dashboard_port=dashboard_port, infra_ip=infra_ip)
         with FleetBus(scenario.bus, scenario.fleet, None, listen=(observer_endpoint,),
                       operator_kinds=("start", "stop")) as bus:
             recorder = Recorder(bus, out / "messages.jsonl")
             operator = OperatorSession(scenario, bus, direct=False)  # the heartbeat, the start
             try:
-                ids = [c.id for c in scenario.cars]
-                print(f"trustfg sim: {len(ids)} cars, waiting for them to come up ...", flush=True)
-                deadline = time.monotonic() + READY_TIMEOUT_S + 5 * len(ids)
-                # On the bus (its token up, or heard though its token never reached us:
-                # OperatorSession.alive) and its status in.
-                def missing() -> list[int]:
-                    alive = operator.alive()
-                    return [i for i in ids if not (i in alive and i in recorder.status)]
-
-                while not stop.is_set() and missing():
-                    recorder.poll()
-                    operator.step()
-                    if processes.crashed() or time.monotonic() > deadline:
-                        raise RuntimeError(f"cars {missing()} did not come up (crashed: {processes.crashed()})")
-                    time.sleep(0.05)
+                _wait_for_cars(scenario, processes, recorder, operator, stop)
                 # The go comes no sooner than sim.settle_s after the last car came up: strangers
                 # still, cars would plan around each other with the widest epsilon.
                 t_go = time.time() + max(START_LEAD_S, scenario.sim.settle_s)
                 operator.start(departures(scenario, seed, t_go), trial=1)
                 context = RunContext(scenario, out, processes, config_path, t_go, recorder)
                 print(f"trustfg sim: go (seed {seed}); recording to {out}", flush=True)
-                end = time.monotonic() + timeout_s
-                next_report = time.monotonic() + 5.0
-                while not stop.is_set() and time.monotonic() < end:
-                    recorder.poll()
-                    operator.step()
-                    while pending and time.time() >= t_go + pending[0][0]:
-                        t_action, action = pending.pop(0)
-                        again = action(context)  # a number: not yet, ask again that much later
-                        if isinstance(again, (int, float)) and not isinstance(again, bool):
-                            pending.append((time.time() - t_go + float(again), action))
-                            pending.sort(key=lambda item: item[0])
-                    if "go" not in processes.cpu.marks and time.time() >= t_go:
-                        processes.cpu.sample(mark="go")  # the go itself: the wait before it plans nothing
-                    arrived = [i for i in ids if recorder.status.get(i) and recorder.status[i].at_goal]
-                    if arrived and "first_arrival" not in processes.cpu.marks:
-                        processes.cpu.sample(mark="first_arrival")
-                    if len(arrived) == len(ids) and not pending and not stay:
-                        break
-                    if time.monotonic() > next_report:
-                        next_report += 5.0
-                        processes.cpu.sample()
-                        print(f"  t+{time.time() - t_go:5.1f}s: {len(arrived)}/{len(ids)} cars at their goals",
-                              flush=True)
-                    time.sleep(0.05)
+                _drive(context, operator, pending, timeout_s, stay, stop)
                 crashed_early = processes.crashed()
                 processes.cpu.sample(mark="end")
                 recorder.poll()
             finally:
-                if on_end is not None:
-                    on_end()
-                processes.stop([name for name in processes.children if name.startswith("car")])
-                recorder.poll()
-                recorder.close()
-                # Wait for the session to close (its listener with it) rather than leave it
-                # to a thread: this process goes on (tests, the fault matrix's next run).
-                bus.close(timeout_s=END_CLOSE_TIMEOUT_S)
+                _end_run(processes, recorder, bus, on_end)
         processes.stop()
-        summary = summarise(final_legs(scenario), out, recorder, t_go, crashed_early)
-        # A close that failed may leave the observer's listener open in this process (it
-        # goes with the process; a caller that runs on, like a test, should know)
-        summary["observer_close"] = {name: bus.counters[name] for name in ("close_timed_out", "close_failed")}
-        if any(summary["observer_close"].values()):
-            print(f"trustfg sim: the observer's Zenoh session did not close cleanly: {summary['observer_close']}",
-                  file=sys.stderr, flush=True)
-        summary["cpu"] = processes.cpu.summary("go", "first_arrival")
-        # From the go to the first arrival; with no car in, to the end of the run (a run
-        # in which no car arrived is the most starved, not the least).
-        until = "first_arrival" if "first_arrival" in processes.cpu.marks else "end"
-        window = summary["cpu"] if until == "first_arrival" else processes.cpu.summary("go", until)
-        summary["machine"] = machine_load(window, usable_cores(), until)
-        summary["t_go"] = t_go  # the go, on the clock of the messages' stamps (None: no go)
+        summary = _summary(scenario, out, processes, recorder, bus, t_go, crashed_early)
     finally:
         processes.stop()
     if context is not None and context.events:
         summary["events"] = [[round(t - context.t_go, 3), what] for t, what in context.events]
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
     summary["recording"] = str(convert_run(out, scenario))
+    return summary
+
+
+def _start_children(processes: Processes, scenario: Scenario, out: Path, config_path: Path, *, seed: int,
+                    natnet_version: str, mocap_args: tuple[str, ...], stop: threading.Event,
+                    dashboard_port: int | None, infra_ip: str) -> None:
+    """Start mocap-sim and wait for it, then the dashboard if asked for, then every car."""
+    mocap = processes.start("mocap-sim", ["mocap-sim", "--config", str(config_path), "--ground-truth",
+                                          str(out / "ground_truth.csv"), "--natnet-version", natnet_version,
+                                          "--command-log", str(out / "commands.csv"),
+                                          "--seed", str(seed), *mocap_args],
+                            out / "mocap_sim.log", stdout=subprocess.PIPE)
+    wait_ready(mocap, stop)
+    if dashboard_port is not None:
+        port = dashboard_port or free_port()
+        processes.start("dashboard", ["dashboard", "--config", str(config_path), "--port", str(port),
+                                      "--listen", f"tcp/{infra_ip}:{free_port()}"], out / "dashboard.log")
+        print(f"dashboard: http://127.0.0.1:{port}/", flush=True)
+    for car in scenario.cars:
+        processes.start(f"car {car.id}", RunContext(scenario, out, processes, config_path, 0.0).car_args(car.id),
+                        out / f"car_{car.id}.log")
+
+
+def _wait_for_cars(scenario: Scenario, processes: Processes, recorder: Recorder, operator: OperatorSession,
+                   stop: threading.Event) -> None:
+    """Until every car is on the bus (its token up, or heard though its token never reached
+    us: OperatorSession.alive) and its status in; RuntimeError if one crashed or is late."""
+    ids = [c.id for c in scenario.cars]
+    print(f"trustfg sim: {len(ids)} cars, waiting for them to come up ...", flush=True)
+    deadline = time.monotonic() + READY_TIMEOUT_S + 5 * len(ids)
+
+    def missing() -> list[int]:
+        alive = operator.alive()
+        return [i for i in ids if not (i in alive and i in recorder.status)]
+
+    while not stop.is_set() and missing():
+        recorder.poll()
+        operator.step()
+        if processes.crashed() or time.monotonic() > deadline:
+            raise RuntimeError(f"cars {missing()} did not come up (crashed: {processes.crashed()})")
+        time.sleep(0.05)
+
+
+def _drive(context: RunContext, operator: OperatorSession, pending: list[tuple[float, Callable]],
+           timeout_s: float, stay: bool, stop: threading.Event) -> None:
+    """From the go until every car is at its goal and no action is pending (or, with
+    ``stay``, the timeout): record, keep the heartbeat, run the scheduled actions when
+    due, mark the CPU samples and report progress every 5 s."""
+    processes, recorder, t_go = context.processes, context.recorder, context.t_go
+    ids = [c.id for c in context.scenario.cars]
+    end = time.monotonic() + timeout_s
+    next_report = time.monotonic() + 5.0
+    while not stop.is_set() and time.monotonic() < end:
+        recorder.poll()
+        operator.step()
+        while pending and time.time() >= t_go + pending[0][0]:
+            t_action, action = pending.pop(0)
+            again = action(context)  # a number: not yet, ask again that much later
+            if isinstance(again, (int, float)) and not isinstance(again, bool):
+                pending.append((time.time() - t_go + float(again), action))
+                pending.sort(key=lambda item: item[0])
+        if "go" not in processes.cpu.marks and time.time() >= t_go:
+            processes.cpu.sample(mark="go")  # the go itself: the wait before it plans nothing
+        arrived = [i for i in ids if recorder.status.get(i) and recorder.status[i].at_goal]
+        if arrived and "first_arrival" not in processes.cpu.marks:
+            processes.cpu.sample(mark="first_arrival")
+        if len(arrived) == len(ids) and not pending and not stay:
+            break
+        if time.monotonic() > next_report:
+            next_report += 5.0
+            processes.cpu.sample()
+            print(f"  t+{time.time() - t_go:5.1f}s: {len(arrived)}/{len(ids)} cars at their goals",
+                  flush=True)
+        time.sleep(0.05)
+
+
+def _end_run(processes: Processes, recorder: Recorder, bus: FleetBus, on_end: Callable[[], None] | None) -> None:
+    """The run is over: ``on_end()``, the cars stopped, the last messages recorded, and the
+    observer's session closed."""
+    if on_end is not None:
+        on_end()
+    processes.stop([name for name in processes.children if name.startswith("car")])
+    recorder.poll()
+    recorder.close()
+    # Wait for the session to close (its listener with it) rather than leave it
+    # to a thread: this process goes on (tests, the fault matrix's next run).
+    bus.close(timeout_s=END_CLOSE_TIMEOUT_S)
+
+
+def _summary(scenario: Scenario, out: Path, processes: Processes, recorder: Recorder, bus: FleetBus,
+             t_go: float | None, crashed_early: list[str]) -> dict:
+    """The run's summary: summary.summarise's keys, how the observer's session closed, the
+    CPU between the go and the first arrival, and the machine's load."""
+    summary = summarise(final_legs(scenario), out, recorder, t_go, crashed_early)
+    # A close that failed may leave the observer's listener open in this process (it
+    # goes with the process; a caller that runs on, like a test, should know)
+    summary["observer_close"] = {name: bus.counters[name] for name in ("close_timed_out", "close_failed")}
+    if any(summary["observer_close"].values()):
+        print(f"trustfg sim: the observer's Zenoh session did not close cleanly: {summary['observer_close']}",
+              file=sys.stderr, flush=True)
+    summary["cpu"] = processes.cpu.summary("go", "first_arrival")
+    # From the go to the first arrival; with no car in, to the end of the run (a run
+    # in which no car arrived is the most starved, not the least).
+    until = "first_arrival" if "first_arrival" in processes.cpu.marks else "end"
+    window = summary["cpu"] if until == "first_arrival" else processes.cpu.summary("go", until)
+    summary["machine"] = machine_load(window, usable_cores(), until)
+    summary["t_go"] = t_go  # the go, on the clock of the messages' stamps (None: no go)
     return summary
 
 
