@@ -36,6 +36,7 @@ of the pipeline off for an ablation (``--set planner.interp_checks=8``).
 
 from __future__ import annotations
 
+import argparse
 import copy
 import json
 import os
@@ -311,6 +312,48 @@ def machine() -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
+    parser = _parser()
+    args = parser.parse_args(argv)
+    if args.recheck < 0:
+        parser.error("--recheck must be at least 0")
+    if args.seeds < 1 or args.fresh < 0 or args.fresh_seeds < 1:
+        parser.error("--seeds and --fresh-seeds must be at least 1, --fresh at least 0")
+    if "orca" in args.methods:
+        from ...sim.orca import MissingLibrary, _pyrvo
+        try:
+            _pyrvo()
+        except MissingLibrary as exc:
+            print(f"trustfg experiment bank: {exc}", file=sys.stderr)
+            return 2
+    out = args.out or Path("runs") / time.strftime("bank-%Y%m%d-%H%M%S")
+    settings = configured("trustfg experiment bank", lambda: parse_settings(args.set))
+    scenes, groups, seeds = _chosen_scenes(args, settings)
+    _add_fresh_scenes(parser, args, out, scenes, groups, seeds)
+    if args.recheck:
+        try:
+            return recheck(scenes, args.methods, seeds, settings, groups, out, args.recheck, args.jobs)
+        except KeyboardInterrupt:
+            print("\nstopped; nothing was written", file=sys.stderr)
+            return 130
+    started = time.perf_counter()
+    if not args.report_only:  # a report of a folder that holds no journal leaves nothing behind
+        out.mkdir(parents=True, exist_ok=True)
+    try:
+        runs = run_bank(scenes, args.methods, seeds, args.jobs, settings, groups, out / "runs.jsonl",
+                        run_missing=not args.report_only)
+    except KeyboardInterrupt:
+        print(f"\nstopped; every finished run is in {out / 'runs.jsonl'}: the same command carries on",
+              file=sys.stderr)
+        return 130
+    if not runs:
+        print(f"trustfg experiment bank: no run of this selection in {out / 'runs.jsonl'}", file=sys.stderr)
+        return 2
+    report = _report_of(args, argv, runs, scenes, groups, seeds, settings, started)
+    _write_report(report, out, figures=not args.no_figures)
+    return 0
+
+
+def _parser() -> argparse.ArgumentParser:
     parser = command_parser("trustfg experiment bank", __doc__)
     parser.add_argument("--scenes", nargs="+", default=list(BANK), metavar="SCENE",
                         help="scene names or files (default: the bank, " + " ".join(BANK) + ")")
@@ -335,20 +378,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--recheck", type=int, default=0, metavar="K",
                         help="run nothing new: rerun K of the journal's runs of the selection (drawn with a fixed "
                              "seed) and say which came out the same; exit 1 when one did not")
-    args = parser.parse_args(argv)
-    if args.recheck < 0:
-        parser.error("--recheck must be at least 0")
-    if args.seeds < 1 or args.fresh < 0 or args.fresh_seeds < 1:
-        parser.error("--seeds and --fresh-seeds must be at least 1, --fresh at least 0")
-    if "orca" in args.methods:
-        from ...sim.orca import MissingLibrary, _pyrvo
-        try:
-            _pyrvo()
-        except MissingLibrary as exc:
-            print(f"trustfg experiment bank: {exc}", file=sys.stderr)
-            return 2
-    out = args.out or Path("runs") / time.strftime("bank-%Y%m%d-%H%M%S")
-    settings = configured("trustfg experiment bank", lambda: parse_settings(args.set))
+    return parser
+
+
+def _chosen_scenes(args: argparse.Namespace, settings: dict) -> tuple[dict, dict, dict]:
+    """The --scenes (data and note by name), their group ("bank") and seeds; every
+    method's variant of each is made once here, so that a bad --set fails now."""
     scenes = {}
     for source in args.scenes:
         data, note = configured("trustfg experiment bank", lambda: scene_data(source))
@@ -358,14 +393,23 @@ def main(argv: list[str] | None = None) -> int:
             configured("trustfg experiment bank", lambda: variant(data, METHODS[method].overrides, settings))
     groups = {name: "bank" for name in scenes}
     seeds = {name: list(range(args.seed, args.seed + args.seeds)) for name in scenes}
+    return scenes, groups, seeds
+
+
+def _add_fresh_scenes(parser: argparse.ArgumentParser, args: argparse.Namespace, out: Path,
+                      scenes: dict, groups: dict, seeds: dict) -> None:
+    """With --fresh, its scenes added to ``scenes`` (group "fresh", --fresh-seeds seeds
+    each): those of out/fresh when a stopped bank carries on, else made now from
+    generator seeds drawn from the operating system's entropy and saved there."""
+    if not args.fresh:
+        return
     fresh = out / "fresh"
-    fresh_seeds: list[int] = []
-    if args.fresh and fresh.is_dir() and any(fresh.glob("*.toml")):
+    if fresh.is_dir() and any(fresh.glob("*.toml")):
         print(f"reusing the fresh scenes in {fresh}", file=sys.stderr)  # a stopped bank carries on
         paths = sorted(fresh.glob("*.toml"))
-    elif args.fresh and (args.report_only or args.recheck):
+    elif args.report_only or args.recheck:
         parser.error(f"--report-only or --recheck with --fresh: no fresh scenes in {fresh} to report on")
-    elif args.fresh:
+    else:
         from ...sim.scene_gen import generate, scene_file_text
         fresh_seeds = [secrets.randbelow(2**31) for _ in range(args.fresh)]
         print(f"fresh {FRESH_KIND} scenes ({args.fresh_cars} cars) from generator seeds {fresh_seeds}", file=sys.stderr)
@@ -377,32 +421,19 @@ def main(argv: list[str] | None = None) -> int:
                                         lambda: generate(FRESH_KIND, args.fresh_cars, seed, name))
             paths.append(fresh / f"{name}.toml")
             paths[-1].write_text(scene_file_text(scenario, FRESH_KIND, args.fresh_cars, seed, text))
-    for path in paths if args.fresh else []:
+    for path in paths:
         data, note = scene_data(path)
         scenes[data["name"]] = (data, note)
         groups[data["name"]] = "fresh"
         seeds[data["name"]] = list(range(args.seed, args.seed + args.fresh_seeds))
-    if args.recheck:
-        try:
-            return recheck(scenes, args.methods, seeds, settings, groups, out, args.recheck, args.jobs)
-        except KeyboardInterrupt:
-            print("\nstopped; nothing was written", file=sys.stderr)
-            return 130
-    started = time.perf_counter()
-    if not args.report_only:  # a report of a folder that holds no journal leaves nothing behind
-        out.mkdir(parents=True, exist_ok=True)
-    try:
-        runs = run_bank(scenes, args.methods, seeds, args.jobs, settings, groups, out / "runs.jsonl",
-                        run_missing=not args.report_only)
-    except KeyboardInterrupt:
-        print(f"\nstopped; every finished run is in {out / 'runs.jsonl'}: the same command carries on",
-              file=sys.stderr)
-        return 130
-    if not runs:
-        print(f"trustfg experiment bank: no run of this selection in {out / 'runs.jsonl'}", file=sys.stderr)
-        return 2
+
+
+def _report_of(args: argparse.Namespace, argv: list[str] | None, runs: list[dict], scenes: dict, groups: dict,
+               seeds: dict, settings: dict, started: float) -> dict:
+    """bank.json: the command, machine and environment, the selection, the summary
+    (fleet.experiments.bank.report) and every run."""
     from . import report as bank_report
-    report = {
+    return {
         "experiment": "bank",
         "command": "trustfg experiment bank " + " ".join(argv if argv is not None else sys.argv[1:]),
         "machine": machine(),
@@ -419,12 +450,16 @@ def main(argv: list[str] | None = None) -> int:
         "summary": bank_report.summarise(runs),
         "runs": runs,
     }
+
+
+def _write_report(report: dict, out: Path, figures: bool) -> None:
+    """out/bank.json, out/bank.md (the table, also printed) and, with ``figures``, out/bank.png."""
+    from . import report as bank_report
     out.mkdir(parents=True, exist_ok=True)
     (out / "bank.json").write_text(json.dumps(report, indent=1))
     table = bank_report.markdown(report)
     (out / "bank.md").write_text(table)
-    if not args.no_figures:
+    if figures:
         bank_report.figure(report, out / "bank.png")
     print(table)
     print(f"wrote {out.resolve()}")
-    return 0
