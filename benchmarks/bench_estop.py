@@ -64,7 +64,7 @@ class Operator:
     """The benchmark's operator on the run's bus (heartbeat, starts, releases)."""
 
     def __init__(self, fleet):
-        self.bus = FleetBus(fleet.bus.session, fleet.fleet, None, listen=(f"tcp/127.0.0.1:{free_port()}",),
+        self.bus = FleetBus(fleet.bus, fleet.fleet, None, listen=(f"tcp/127.0.0.1:{free_port()}",),
                             kinds=("status",), operator_kinds=())
         self.bus.open()
         self.session = OperatorSession(fleet, self.bus)

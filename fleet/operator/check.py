@@ -64,7 +64,7 @@ def report(fleet: Scenario, seen: dict[int, Seen], motive: str | None, others: l
     out = Report(rows=[["car", "body", "pose x y (m) yaw (deg)", "from start", "link", "bus", "clock offset"]])
     if motive is not None:
         out.missing.append(f"Motive: {motive}")
-    tolerance = fleet.operator.session.clock_tolerance_s
+    tolerance = fleet.operator.clock_tolerance_s
     for car in fleet.cars:
         s = seen[car.id]
         if s.pose is not None and s.tracked:
@@ -128,7 +128,7 @@ def gather(fleet: Scenario, wait_s: float, listen: tuple[str, ...], use_natnet: 
     stopper = LinkStopper(fleet)
     inbox = messages.Inbox()
     try:
-        with FleetBus(fleet.bus.session, fleet.fleet, None, listen=listen, kinds=("status",), operator_kinds=()) as bus:
+        with FleetBus(fleet.bus, fleet.fleet, None, listen=listen, kinds=("status",), operator_kinds=()) as bus:
             deadline = time.monotonic() + wait_s
             next_ping = 0.0
             while time.monotonic() < deadline:

@@ -100,7 +100,7 @@ def _on_the_bus(fleet: "Scenario", cars: list[int], action: str, args: argparse.
     seen = {car: "" for car in cars}
     try:
         if args.path != "link":
-            bus = FleetBus(fleet.bus.session, fleet.fleet, None, listen=tuple(args.listen), operator_kinds=())
+            bus = FleetBus(fleet.bus, fleet.fleet, None, listen=tuple(args.listen), operator_kinds=())
             bus.open()
             if action != "estop":  # not urgent: first let the session reach the car processes (their
                 _wait_alive(bus, cars, BUS_JOIN_S)  # tokens), or the message waits for their history query

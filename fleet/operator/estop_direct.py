@@ -50,7 +50,7 @@ class LinkStopper:
         from ...agent.config import ConfigError
 
         self.clock = clock
-        self.release_s = fleet.operator.session.release_s
+        self.release_s = fleet.operator.release_s
         self.senders: dict[int, CommandSender] = {}
         self.unreachable: dict[int, str] = {}
         """Cars without a direct path, and why (their key does not read on this machine, a

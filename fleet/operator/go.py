@@ -52,7 +52,7 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("--lead must be > 0, --stagger and --wait >= 0")
     stop = stop_on_signals(threading.Event())
     try:
-        with FleetBus(fleet.bus.session, fleet.fleet, None, listen=tuple(args.listen), kinds=("status",),
+        with FleetBus(fleet.bus, fleet.fleet, None, listen=tuple(args.listen), kinds=("status",),
                       operator_kinds=()) as bus:
             session = OperatorSession(fleet, bus)
             try:

@@ -41,7 +41,7 @@ class Published:
     """What the cars publish, as the test itself hears it on the bus."""
 
     def __init__(self, fleet):
-        self.bus = FleetBus(fleet.bus.session, fleet.fleet, None, listen=(f"tcp/127.0.0.1:{free_port()}",))
+        self.bus = FleetBus(fleet.bus, fleet.fleet, None, listen=(f"tcp/127.0.0.1:{free_port()}",))
         self.inbox = messages.Inbox()
         self.poses = defaultdict(lambda: deque(maxlen=100))
         self.trust = defaultdict(lambda: deque(maxlen=20))

@@ -44,7 +44,7 @@ def test_install_errors_are_one_line(argv, says):
 @pytest.mark.parametrize("name", ["fleet", "fleet-secure"])
 def test_the_lab_configs_load_with_the_deadman_on_and_name_themselves(name):
     fleet = load_scenario(f"lab/{name}")
-    assert fleet.operator.session.deadman_s > 0 and not fleet.control.start_timeout_s
+    assert fleet.operator.deadman_s > 0 and not fleet.control.start_timeout_s
     text = (ROOT / "deploy" / "lab" / f"{name}.toml").read_text()
     assert f"deploy/lab/{name}.toml" in text.split("\n\n")[0].replace("\n# ", " ")
     assert "docs/lab.md" in text
@@ -52,8 +52,8 @@ def test_the_lab_configs_load_with_the_deadman_on_and_name_themselves(name):
 
 def test_the_secure_lab_uses_tls_everywhere():
     fleet = load_scenario("lab/fleet-secure")
-    endpoints = [*fleet.bus.session.connect, *(e for car in fleet.cars for e in car.listen)]
-    assert endpoints and all(e.startswith("tls/") for e in endpoints) and fleet.bus.session.zenoh_config
+    endpoints = [*fleet.bus.connect, *(e for car in fleet.cars for e in car.listen)]
+    assert endpoints and all(e.startswith("tls/") for e in endpoints) and fleet.bus.zenoh_config
 
 
 def test_systemd_accepts_the_rendered_unit(tmp_path):

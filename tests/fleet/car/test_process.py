@@ -52,7 +52,7 @@ def test_car_process_stops_without_pose_drives_after_start_and_stops_on_sigterm(
     observer = f"tcp/127.0.0.1:{free_port()}"
     with NatNetServer(options, served(car, lambda: tracked["on"])), \
             CommandReceiver(car.id, (host, int(port)), key=link_key(car)) as link, \
-            FleetBus(fleet.bus.session, fleet.fleet, None, listen=(observer,)) as bus:
+            FleetBus(fleet.bus, fleet.fleet, None, listen=(observer,)) as bus:
         process = subprocess.Popen([sys.executable, "-m", "trustfg", "car", "--id", str(car.id), "--config",
                                     str(path), "--stats", str(stats)], stderr=subprocess.PIPE, text=True)
         try:
@@ -141,7 +141,7 @@ def test_a_frozen_car_process_stops_its_car_and_a_killed_one_leaves_it_stopped(o
     observer = f"tcp/127.0.0.1:{free_port()}"
     with NatNetServer(options, served(car, lambda: True)), \
             CommandReceiver(car.id, (host, int(port)), key=link_key(car)) as link, \
-            FleetBus(fleet.bus.session, fleet.fleet, None, listen=(observer,)) as bus:
+            FleetBus(fleet.bus, fleet.fleet, None, listen=(observer,)) as bus:
         process = subprocess.Popen([sys.executable, "-m", "trustfg", "car", "--id", str(car.id), "--config",
                                     str(path)], stderr=subprocess.DEVNULL)
         loop = None

@@ -33,7 +33,7 @@ def test_a_trust_report_is_stamped_when_it_is_sent_not_when_its_pass_began(inter
             process.stop.set()
 
     process._replan = slow_replan
-    bus = FleetBus(fleet.bus.session, fleet.fleet, car.id, listen=car.listen, clock=process.clock)
+    bus = FleetBus(fleet.bus, fleet.fleet, car.id, listen=car.listen, clock=process.clock)
     bus.open()
     sent = bus.publish
 

@@ -62,7 +62,7 @@ def test_the_clock_offset_is_taken_from_the_shortest_round_trip():
 
 def test_a_clock_within_its_uncertainty_of_the_tolerance_is_not_warned_of(fleet):
     seen = all_seen(fleet)
-    seen[1].clock = (fleet.operator.session.clock_tolerance_s + 0.004, 0.005)  # could be within
+    seen[1].clock = (fleet.operator.clock_tolerance_s + 0.004, 0.005)  # could be within
     assert report(fleet, seen, None, []).warnings == []
-    seen[1].clock = (-(fleet.operator.session.clock_tolerance_s + 0.006), 0.005)
+    seen[1].clock = (-(fleet.operator.clock_tolerance_s + 0.006), 0.005)
     assert len(report(fleet, seen, None, []).warnings) == 1

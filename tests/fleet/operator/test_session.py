@@ -76,8 +76,8 @@ def test_two_trials_in_a_row_without_restarting_a_car_process(fresh):
     assert second == first + 1
     assert fleet.wait_states({"arrived"}, timeout_s=40.0), fleet.states()
     assert all(seen.trial == second for seen in fleet.session.cars.values())
-    pids = {name: p.pid for name, p in fleet.launch.processes.children.items()}
-    assert all(fleet.launch.processes.children[name].poll() is None for name in pids)  # the same processes
+    pids = {name: p.pid for name, p in fleet.processes.children.items()}
+    assert all(fleet.processes.children[name].poll() is None for name in pids)  # the same processes
 
 
 def test_e_stop_without_any_car_process_and_the_car_stays_stopped_until_released(fresh):
@@ -96,7 +96,7 @@ def test_e_stop_without_any_car_process_and_the_car_stays_stopped_until_released
     resumed = time.time()
     time.sleep(1.5)
     assert fleet.moved_after(stopped) == set(), fleet.commands()[-8:]
-    assert all(fleet.launch.processes.children[f"car {car}"].poll() is None for car in fleet.ids)
+    assert all(fleet.processes.children[f"car {car}"].poll() is None for car in fleet.ids)
     assert all(seen.state in ("driving", "stuck", "e_stopped") for seen in fleet.session.cars.values())
     # The car processes learn the latch from their cars' answers, and say so.
     assert fleet.wait_states({"e_stopped"}, timeout_s=3.0), fleet.states()
@@ -194,7 +194,7 @@ def test_a_car_started_10_s_before_mocap_sim_and_its_peers_joins_and_drives(inte
     with LoopbackFleet(intersection, tmp_path, cars_first=(1,)) as fleet:
         time.sleep(10.0)
         log = (tmp_path / "car_1.log").read_text()
-        assert fleet.launch.processes.children["car 1"].poll() is None, log
+        assert fleet.processes.children["car 1"].poll() is None, log
         assert "Traceback" not in log and "Error" not in log.replace("NatNetConnectionError", ""), log
         assert "waiting for Motive at" in log and "peers 2 3 4 on the bus" in log, log
         assert fleet.session.cars[1].state == "waiting"
