@@ -56,9 +56,9 @@ flags (CRC 0xC0E042BB)::
     00 00 80 3e 00 00 00 bf 00 00 bb 42 e0 c0
 
 A receiver rejects, in this order: wrong length, bad magic, unknown version, bad CRC,
-car id 0, non-finite stamp/v/omega (NaN or infinity), reserved flag bits set or E_STOP
-with RELEASE. Encoding
-rounds v and omega to the nearest f32 (a value beyond the f32 range is an error).
+car id 0, reserved flag bits set or E_STOP with RELEASE, non-finite stamp/v/omega (NaN or
+infinity). Encoding rounds v and omega to the nearest f32 (a value beyond the f32 range
+is an error).
 
 Datagram (version 2, authenticated)
 -----------------------------------
@@ -97,9 +97,9 @@ v 0.25 m/s, omega -0.5 rad/s, no flags::
     e1 4c 98 dd
 
 (the MAC is the last 16 bytes). A receiver rejects, in this order: wrong length, bad
-magic, other version, bad MAC, reserved byte not 0, car id 0, non-finite numbers, reserved
-flag bits. Which sessions and sequence numbers it accepts (replays, restarts) is in
-:mod:`.receiver`.
+magic, other version, bad MAC, reserved byte not 0, car id 0, reserved flag bits or E_STOP
+with RELEASE, non-finite numbers. Which sessions and sequence numbers it accepts (replays,
+restarts) is in :mod:`.receiver`.
 
 What a car does with the commands it decodes is in :mod:`.receiver`. The constants, the
 layouts, the flags and the framing (CRC, MAC) are code in :mod:`.frame`, quick to import;
