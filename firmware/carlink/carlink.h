@@ -13,7 +13,7 @@
  * fine), and it returns what to do -- the verdict, the decoded command, the bytes of an
  * answer to send back to the datagram's sender. carlink_motors() says at any time what
  * the motors should do. All state lives in a carlink_state the caller owns (about
- * 3.6 KB: keep it static, not on a small stack). Not thread-safe: one context calls it.
+ * 3.5 KB: keep it static, not on a small stack). Not thread-safe: one context calls it.
  *
  * Needs IEEE 754 binary32 floats (every MCU with or without an FPU); no doubles: the
  * stamp travels as its 64 raw bits.
@@ -41,14 +41,14 @@ extern "C" {
 #define CARLINK_RESYNC_MS 1000u    /* receiver.DEFAULT_RESYNC_AFTER_S (version 1 only) */
 
 /* Command flags (u16). */
-#define CARLINK_E_STOP 0x0001u
-#define CARLINK_STOP 0x0002u
-#define CARLINK_RELEASE 0x0004u
-#define CARLINK_PING 0x0008u
+#define CARLINK_E_STOP (0x0001u)
+#define CARLINK_STOP (0x0002u)
+#define CARLINK_RELEASE (0x0004u)
+#define CARLINK_PING (0x0008u)
 
 /* State bits of an answer (u16). */
-#define CARLINK_STATE_E_STOP_LATCHED 0x0001u
-#define CARLINK_STATE_STOPPED 0x0002u
+#define CARLINK_STATE_E_STOP_LATCHED (0x0001u)
+#define CARLINK_STATE_STOPPED (0x0002u)
 
 /* What became of one datagram. The first three are taken; the rest are dropped. The
  * names (carlink_verdict_name) are receiver.FilterCounters' and CarLinkError's reasons. */

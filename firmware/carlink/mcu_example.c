@@ -36,7 +36,7 @@ void board_log(const char *what, unsigned value); /* optional: a UART line */
 
 /* ---------------------------------------------------------------- the car's part */
 
-/* ~3.6 KB: static, never on a task's stack. Only car_link_poll() touches it. */
+/* ~3.5 KB: static, never on a task's stack. Only car_link_poll() touches it. */
 static carlink_state link_state;
 
 /* 0 when the car is ready; without a key it refuses to run rather than fall back to
