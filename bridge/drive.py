@@ -1,19 +1,17 @@
 """One control tick of a car: the plan and the pose in, a velocity command out.
 
-The car process (fleet.car.process, at ``control.command_rate_hz`` on real time) and the
-in-process fleet (fleet.sim.in_process, on simulated time) both command their cars through
+The car process's velocity loop (fleet.car.velocity_loop, on real time) and the in-process
+fleet (fleet.sim.in_process, on simulated time) both command their cars through
 :func:`drive`, so the experiments measure the pipeline that drives the cars:
 
 1. STOP when the car may not drive (no start yet, before its departure, arrived), has
    no plan, or does not see itself;
 2. else the tracking command for the plan (bridge.trajectory_controller);
 3. capped, when ``guard.enabled``, by the proximity guard (agent.guard) against the
-   other cars it sees and the map's walls ahead of it. A car the guard holds (a cap
-   under HELD_MPS) stands and turns on the spot to where its plan goes. Kanayama's turn
-   rate is the plan's curvature times its speed; applied to a car held still it spun the
-   car, and the turn-first rule turned it back: beside a pillar (random-field-6-a, seed
-   60) a car swung between 165 and 200 degrees, every heading of it into the pillar, for
-   40 s, while its plan went off at 134 degrees, where the way was free.
+   other cars it sees and the map's walls ahead of it. A car the guard holds (a cap under
+   HELD_MPS) stands and turns on the spot to where its plan goes: the tracker's turn rate
+   is made for a car that moves, and spins one held still (docs/design/links.md, "The
+   control tick").
 """
 
 from __future__ import annotations
@@ -50,8 +48,9 @@ def drive(plan: Plan | None, t: float, pose: tuple[float, float, float] | None, 
           scenario: Scenario, sdf: SignedDistanceField | None, reaction_s: float | None = None) -> Command:
     """The command of a car at ``pose`` (x, y, yaw; None: not seen) following ``plan`` at
     time ``t``; ``others()`` gives the other cars it sees, (x, y, yaw, radius), and is
-    asked only when the guard needs it; ``reaction_s``: the guard's reaction time as
-    measured (agent.guard.reaction_time; default the configured one)."""
+    asked only when the guard needs it; ``reaction_s``: the guard's reaction time from the
+    pose's age and the loop's tick gaps (agent.guard.reaction_time; default the configured
+    one)."""
     if pose is None or plan is None or not may_drive:
         return STOP
     v, omega = track(plan, t, pose[0], pose[1], pose[2], scenario.tracking, scenario.vehicle)

@@ -3,19 +3,13 @@ blocked, its motors are off.
 
 After ``STUCK_AFTER_S`` in which the car was told to drive at ``STUCK_COMMAND_MPS`` or
 more on average in each half of the window and its own pose moved slower than
-``STUCK_MOTION_MPS``, the car is *stuck*; it is moving again once it moves at twice
-that. The car process keeps commanding its plan (so the car goes again if it can) but
-tells its peers the truth -- a plan that stands still where the car stands, marked
-stuck -- so nobody waits for, or gives way to, a car that announces it is about to drive
-through. Pure: the control loop passes the time, the pose and the command.
-
-On average, not at every tick: a car that replans from where it stands starts every
-plan at rest, so its commands rise from zero again at each replan (link-cut, car 2 cut
-at the entry of the intersection: commands 0-0.4 m/s every 0.2 s for 30 s, never all
-above 0.1 m/s at once). In each half of the window, not over the whole: a car told to
-set off late in the window has not moved yet for its lag and its acceleration (8-car
-process runs, averaged over the whole window: 1-3 such cars a run called stuck for
-0.1-0.3 s).
+``STUCK_MOTION_MPS``, the car is *stuck*; it is moving again once it moves at twice that.
+The car process keeps commanding its plan (so the car goes again if it can) but tells its
+peers the truth -- a plan that stands where the car stands, marked stuck. On average,
+because a car that replans from rest commands speeds rising from zero at every replan; in
+each half, because a car told to set off late in the window has not moved yet for its lag
+and its acceleration (docs/design/links.md, "The motion watch"). Pure: the control loop
+passes the time, the pose and the command.
 """
 
 from __future__ import annotations

@@ -1,67 +1,15 @@
-"""NatNet client: the sockets and the thread around the pure codec in :mod:`bridge.natnet`.
+"""NatNet client: the sockets around the pure codec in :mod:`bridge.natnet`.
 
-Two pieces, as everywhere in trustfg:
-
-* :class:`FrameReceiver` (in :mod:`bridge.natnet_receiver`, re-exported here) is the logic
-  and opens nothing: datagrams in (``handle``), frames out. It decodes, counts (received,
-  decoded, rejected by reason, frames dropped by gaps in frame numbers, stale/out-of-order),
-  keeps a latest-value slot per rigid body id and calls an optional ``on_frame`` callback.
-  Tests drive it with captured bytes.
-* :class:`NatNetClient` is the thin I/O layer, a context manager: it owns the socket, the
-  thread and the unicast duties. Its options are in :mod:`bridge.natnet_options`, its
-  sockets and the handshake on the command port in :mod:`bridge.natnet_sockets`; the
-  names callers use are re-exported here.
-
-Modes (``NatNetClientOptions.multicast``):
-
-* **Multicast** (Motive's default). The client joins ``multicast_group`` on the interface
-  ``local_address`` and receives on ``data_port`` (1511). The socket is bound with
-  SO_REUSEADDR and SO_REUSEPORT, so every car process on a host can bind the same port
-  and join the group, and each gets every datagram (the kernel delivers a multicast
-  datagram to every socket bound to the port; on POSIX the socket is bound to the group
-  address, so other groups on the same port stay out). If ``handshake`` is on, the client
-  first sends CONNECT to the server's command port (1510) from a short-lived socket and
-  learns the NatNet version from SERVERINFO; otherwise ``natnet_version`` must be set.
-* **Unicast.** One socket bound to an ephemeral port on ``local_address`` sends CONNECT to
-  the command port, waits for SERVERINFO (resending every ``connect_retry_s``; a clear
-  :class:`NatNetConnectionError` after ``connect_timeout_s``), then receives the frames
-  the server sends to that same address (as Motive and the SDK samples do: in unicast the
-  data arrive on the socket the client connected from) and sends KEEPALIVE every
-  ``keepalive_interval_s``. Several clients on one host each get every frame because each
-  has its own port and the server sends to every connected address. This socket is
-  deliberately *not* bound with SO_REUSEADDR/SO_REUSEPORT: sockets sharing a unicast port
-  would split the stream between them (Linux load-balances unicast datagrams over
-  SO_REUSEPORT sockets). When nothing arrives for ``reconnect_after_s``, CONNECT is sent
-  again (a restarted server forgets its clients).
-
-Version negotiation: CONNECT announces the client as NatNet 4.2 (the newest layout the
-codec knows, ``natnet.NEWEST_LAYOUT``) and, if ``requested_version`` is set, asks for that
-bitstream version in the connection options (NatNet 4 servers honour it). The client then
-decodes what SERVERINFO says the server streams -- 2.x, 3.0, 3.1, 4.0 to 4.4 (4.3 and 4.4
-with the 4.2 layout, as the SDK's own depacketizer does) -- unless ``natnet_version`` pins
-a layout; anything newer is a clear :class:`NatNetConnectionError`, never a guess. A
-SERVERINFO arriving later (a restarted or reconfigured server) switches the layout.
-
-Model definitions: after the handshake the client asks for MODELDEF (REQUEST_MODELDEF on
-the command socket) and keeps the rigid bodies' names and ids (:meth:`NatNetClient.body_ids`,
-``name -> id``, so a config can name bodies); in unicast it asks again when a frame says the
-tracked models changed. Without an answer the client still streams; the model stays empty.
-
-One thread owns the receiving socket; the handshake runs before it starts, in the caller.
-Sockets always have timeouts, so ``close()`` stops and joins within a bounded time.
-
-Pull (``NatNetClientOptions.pull``): no socket thread. Every read (``latest``,
-``latest_all``, ``stats``, ``wait_for_frames``, or ``pump`` itself) first takes every
-datagram waiting on the socket, each stamped with its arrival as the kernel saw it
-(SO_TIMESTAMPNS, on the monotonic clock; where the OS gives no stamp, the read's time --
-and Linux turns stamping on for the host a moment after the first socket asks, so the
-very first datagrams may carry it),
-and does the unicast keepalive and reconnect duties the thread would have done. For a
-process that reads at a rate of its own anyway (a car's command loop and its agent, 50 Hz
-of Motive's 120-360): no thread is woken, and no interpreter lock taken, for each frame.
-The samples read are those the thread would have given, with the same arrival times;
-while nobody reads, datagrams wait in the socket's receive buffer (``receive_buffer_bytes``;
-what overflows it is lost, the newest first, and counted as ``dropped`` by the frame-number gap).
+:class:`NatNetClient` is the thin I/O layer, a context manager: it owns the socket, the
+unicast duties (KEEPALIVE, MODELDEF again when Motive's models change, CONNECT again after
+silence) and a socket thread -- or none (``pull``: every read first takes the datagrams
+waiting, each stamped with its arrival as the kernel saw it). It feeds a
+:class:`FrameReceiver` (:mod:`bridge.natnet_receiver`), the logic that decodes, counts and
+keeps the latest pose of every rigid body. Its options are in :mod:`bridge.natnet_options`,
+its sockets and the handshake in :mod:`bridge.natnet_sockets`; the names callers use are
+re-exported here. It decodes the version SERVERINFO announces (2.x to 4.4) unless
+``natnet_version`` pins one, and refuses a newer one. Multicast, unicast, versions and
+pulling: docs/design/links.md, "NatNet ingestion".
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 listens, and how a fleet config's ``[natnet]`` table becomes them.
 
 Ports, group and interface default to Motive's, read from :class:`NatNetConfig` (their one
-home). What each mode does with these options is in :mod:`bridge.natnet_client`'s docstring.
+home). What each mode does with these options: docs/design/links.md, "NatNet ingestion".
 """
 
 from __future__ import annotations
@@ -53,7 +53,8 @@ class NatNetClientOptions:
     """Keep the newest frame undecoded until a reader asks for the latest samples; see
     FrameReceiver (no ``on_frame`` then, and no ``max_frame_rate_hz``)."""
     pull: bool = False
-    """No socket thread: readers take the waiting datagrams (natnet_client's docstring, "Pull")."""
+    """No socket thread: readers take the waiting datagrams (docs/design/links.md, "Threads: a
+    socket thread, or pull")."""
 
     def __post_init__(self) -> None:
         if self.multicast and not self.handshake and self.natnet_version is None:

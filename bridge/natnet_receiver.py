@@ -26,8 +26,7 @@ from .natnet import Frame, MessageId, ModelDef, NatNetError, RigidBody, ServerIn
 
 __all__ = ["FrameReceiver", "BodySample", "NatNetStats"]
 
-# The receiver was part of natnet_client and logs under its name, so log lines and
-# logging configuration keep naming the client.
+# The whole NatNet client logs under one name, so one logger configures it.
 log = logging.getLogger("trustfg.bridge.natnet_client")
 
 

@@ -4,7 +4,7 @@ Opening the sockets (unicast: an ephemeral port of the client's own; multicast: 
 port shared by every process on the host, joined to the group), the kernel's arrival stamp
 of a datagram (SO_TIMESTAMPNS), and the command-port conversation: CONNECT until SERVERINFO
 answers, then the model definitions (MODELDEF). Why each socket is set up as it is, and
-what each mode does, is in :mod:`bridge.natnet_client`'s docstring; that client is the one
+what each mode does: docs/design/links.md, "Multicast and unicast". The client is the one
 user, and these functions log under its name.
 """
 
@@ -84,7 +84,7 @@ def command_address(o: NatNetClientOptions) -> tuple[str, int]:
 
 
 def command_socket(o: NatNetClientOptions) -> socket.socket:
-    """A socket of our own on an ephemeral port: no SO_REUSE* (natnet_client's docstring, "Unicast")."""
+    """A socket of our own on an ephemeral port: no SO_REUSE* (docs/design/links.md, "Multicast and unicast")."""
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     try:
         _receive_buffer(sock, o.receive_buffer_bytes)

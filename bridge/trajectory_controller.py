@@ -1,22 +1,11 @@
 """Unicycle trajectory tracking: plan + measured pose -> (v, omega).
 
-The controller of Kanayama et al., "A stable tracking control method for an autonomous
-mobile robot" (ICRA 1990). With the reference pose (p_r, theta_r) and velocities
-(v_r, omega_r) of the plan at time t, and the error expressed in the car's frame
-
-    e_x =  cos(theta) dx + sin(theta) dy,    e_y = -sin(theta) dx + cos(theta) dy,
-    e_theta = wrap(theta_r - theta),          (dx, dy) = p_r - p
-
-the command is
-
-    v     = v_r cos(e_theta) + k_along e_x
-    omega = omega_r + v_r (k_cross e_y + k_heading sin(e_theta))
-
-with theta_r = atan2(v_ref), v_r = |v_ref| and omega_r = (v_x a_y - v_y a_x) / |v_ref|^2
-from the plan's velocity and acceleration. When the plan stands still (v_r ~ 0), the car
-turns towards the reference point and creeps to it, or stops once within
+:func:`track` is the controller of Kanayama et al., "A stable tracking control method for
+an autonomous mobile robot" (ICRA 1990); its equations are in its docstring. When the plan
+stands still, the car turns towards the reference point and creeps to it, or stops within
 ``goal_tolerance_m``; when it faces more than ``turn_first_deg`` away from the plan's
-direction, it turns on the spot first. Commands are clamped to the vehicle's limits; no reversing.
+direction, it turns on the spot first. :func:`turn_on_the_spot` points a car the guard
+holds to where its plan goes. Commands are clamped to the vehicle's limits; no reversing.
 """
 
 from __future__ import annotations
@@ -37,7 +26,21 @@ def wrap(angle: float) -> float:
 
 def track(plan: Plan, t: float, x: float, y: float, yaw: float, gains: TrackingConfig,
           limits: VehicleConfig) -> tuple[float, float]:
-    """The (v, omega) command that makes a car at (x, y, yaw) follow ``plan`` at time t."""
+    """The (v, omega) command that makes a car at (x, y, yaw) follow ``plan`` at time t.
+
+    With the plan's reference position p_r, velocity v_ref = (v_x, v_y) and acceleration
+    (a_x, a_y) at t, and the error expressed in the car's frame (theta = yaw, p = (x, y))
+
+        e_x =  cos(theta) dx + sin(theta) dy,    e_y = -sin(theta) dx + cos(theta) dy,
+        e_theta = wrap(theta_r - theta),          (dx, dy) = p_r - p
+
+    the command is
+
+        v     = v_r cos(e_theta) + k_along e_x
+        omega = omega_r + v_r (k_cross e_y + k_heading sin(e_theta))
+
+    with theta_r = atan2(v_ref), v_r = |v_ref| and omega_r = (v_x a_y - v_y a_x) / |v_ref|^2.
+    """
     (p_ref,), (v_ref,) = plan.state_at(t)
     (a_ref,) = plan.acceleration_at(t)
     dx, dy = p_ref[0] - x, p_ref[1] - y
@@ -77,7 +80,7 @@ def turn_on_the_spot(plan: Plan, t: float, x: float, y: float, yaw: float, gains
     """The turn rate that points a car standing at (x, y, yaw) where the plan goes at t:
     along the plan's velocity, or at its reference point while the plan stands still.
     For a car held still (by the guard, bridge.drive): Kanayama's turn rate assumes the
-    car moves at the reference speed, and held it only spins with the plan's curvature."""
+    car moves at the reference speed; held, it would only spin with the plan's curvature."""
     (p_ref,), (v_ref,) = plan.state_at(t)
     if float(np.hypot(v_ref[0], v_ref[1])) >= STANDSTILL_MPS:
         heading = math.atan2(v_ref[1], v_ref[0])

@@ -1,31 +1,17 @@
 """Car link: velocity commands from a car process to its car, one UDP datagram each.
 
-Three pieces, each documented where it lives:
+Pure pieces: :mod:`.frame` (constants, layouts, CRC and MAC; quick to import),
+:mod:`.codec` (the validated :class:`Command`, and the byte table a firmware writer
+starts from), :mod:`.answer` (a car's answer to a PING), :mod:`.receiver`
+(:class:`CommandFilter`, the rules a car runs; mocap-sim's cars run this very class) and
+:mod:`.keys`. I/O: :mod:`.link` (:class:`CommandSender`, :class:`CommandReceiver`) and
+:mod:`.direct` (one E_STOP with the standard library alone). :mod:`.conformance` is
+``trustfg carlink-test`` and is not re-exported.
 
-* :mod:`.codec` -- the bytes (pure): the datagram layout, the flags, the CRC in C and a
-  worked example; :func:`encode_command` / :func:`decode_command`. Start here to write
-  firmware. :mod:`.frame` holds its constants, layouts and framing, quick to import.
-* :mod:`.receiver` -- the car's rules (pure): :class:`CommandFilter`, which datagrams a car
-  accepts and what it applies (sequence numbers, restarts, watchdog, E_STOP/STOP). Real
-  firmware runs these rules; mocap_sim's simulated car runs this very class.
-* :mod:`.answer` -- the bytes a car sends back to a PING datagram (pure).
-* :mod:`.link` -- the sockets (thin I/O): :class:`CommandSender` for the car process and
-  the operator's tools (:meth:`CommandSender.for_car` builds it from a car's config) and
-  :class:`CommandReceiver`, a reader thread feeding a :class:`CommandFilter`.
-* :mod:`.direct` -- one E_STOP datagram with the standard library alone (``trustfg stop``'s
-  first, before the rest loads).
-* :mod:`.keys` -- where a car's link key comes from (its key file) and how one is made.
-* :mod:`.conformance` -- ``trustfg carlink-test``: a car probed over UDP, rule by rule of
-  :mod:`.receiver` (its probes and socket in :mod:`.conformance_probes`). Not re-exported.
-
-Imports point one way: ``codec``, ``answer``, ``receiver``, ``keys``, ``direct`` and
-``link`` use ``frame``; ``answer``, ``receiver`` and ``link`` use ``codec``; ``receiver``
-uses ``answer``; ``link`` uses ``answer``, ``receiver``, ``keys`` and ``direct``;
-``conformance_probes`` uses ``frame``, ``answer``, ``direct``, ``keys`` and ``receiver``'s
-defaults, and ``conformance`` uses it.
-Everything public is re-exported here, so callers import from ``trustfg.bridge.carlink``;
-the re-exports load on first use (PEP 562), so that importing :mod:`.frame`, :mod:`.keys`
-or :mod:`.direct` alone stays quick: ``trustfg stop`` sends its first E_STOPs with them.
+Everything else public is re-exported here and loads on first use (PEP 562), so importing
+:mod:`.frame`, :mod:`.keys` or :mod:`.direct` alone stays quick: ``trustfg stop`` sends its
+first E_STOPs with them. Imports point one way, from ``frame`` up (docs/design/links.md,
+"The car link's sockets"); the wire format for firmware writers is docs/carlink.md.
 """
 
 from __future__ import annotations

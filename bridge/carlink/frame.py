@@ -39,7 +39,7 @@ class CarLinkError(ValueError):
 
     ``reason`` is a short machine-readable tag (``"length"``, ``"magic"``, ``"version"``,
     ``"crc"``, ``"mac"``, ``"reserved"``, ``"car_id"``, ``"non_finite"``, ``"flags"``,
-    ``"range"``, ``"type"``, ``"key"``) used to count rejections; ``"range"`` and
+    ``"range"``, ``"type"``, ``"key"``) by which rejections are counted; ``"range"`` and
     ``"type"`` come only from building a :class:`~.codec.Command`, ``"key"`` from a bad key.
     """
 

@@ -1,24 +1,14 @@
 """Car-link sockets: the car process's sender and a car's receiver thread (thin I/O).
 
-The bytes are in :mod:`.codec`, the receiving rules in :mod:`.receiver`; this module only
-moves datagrams between them and UDP sockets.
-
-Sender (:class:`CommandSender`): one datagram per :meth:`~CommandSender.send`, numbered
-and stamped; version 2 (authenticated, a new session per sender) when it has the car's
-key, version 1 without. :meth:`CommandSender.for_car` picks the version, the key and the
-address from a car's config, so every sender of a car (its car process, an operator's
-e-stop) speaks what the car expects. It keeps no schedule of its own: the car process's
-control loop calls ``send()`` at ``control.command_rate_hz`` (50 Hz) on absolute deadlines, and a late tick
-sends once rather than catching up in a burst (``fleet/ticker.py``). On shutdown it sends
-a few STOP datagrams, with E_STOP if the last command had it.
-
-The sender also reads, without blocking, the answers a car sends back to its PING
-datagrams (:mod:`.answer`) on the same socket (:meth:`CommandSender.answers`).
-
-Receiver (:class:`CommandReceiver`): a bound UDP socket and a reader thread that feeds
-every datagram to a :class:`~.receiver.CommandFilter` and answers PINGs from the same
-socket (mocap_sim's simulated cars use it).
-
+The bytes are in :mod:`.codec`, the receiving rules in :mod:`.receiver`; this module moves
+datagrams between them and UDP sockets. :class:`CommandSender` sends one numbered, stamped
+datagram per :meth:`~CommandSender.send` -- version 2 (a session of its own) with the car's
+key, version 1 without; :meth:`CommandSender.for_car` builds it from a car's config -- reads
+the car's answers to its PINGs without blocking, and on shutdown sends a few STOPs that
+keep an E_STOP. It keeps no schedule: the caller's loop sets the pace
+(``fleet/car/ticker.py``). :class:`CommandReceiver` is a bound socket and a reader thread
+feeding a :class:`~.receiver.CommandFilter` and answering PINGs (mocap-sim's cars).
+Design: docs/design/links.md, "The car link's sockets".
 """
 
 from __future__ import annotations

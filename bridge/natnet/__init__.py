@@ -1,30 +1,17 @@
 """NatNet wire codec: datagrams <-> frozen dataclasses, no sockets.
 
-NatNet is OptiTrack Motive's UDP streaming protocol. This package decodes and encodes its
-messages exactly as laid out by the NatNet SDK (the ``PacketClient.cpp`` and
-``NatNetClient.py`` direct-depacketization samples of SDK 3.x/4.x). Frames and model
-definitions of NatNet 3.0, 3.1, 4.0, 4.1 and 4.2 are decoded and encoded; 4.3 and 4.4 are
-decoded with the 4.2 layout (as the SDK's 2025 sample reads them); frames of the legacy
-2.x layouts (2.0 to 2.11, tested on 2.5/2.7/2.9 captures) are decoded only. Every decoding problem raises
-:class:`NatNetError` (a ``ValueError``) with a ``reason`` for counters; nothing else
-escapes a decoder.
+NatNet is OptiTrack Motive's UDP streaming protocol; this package reads and writes its
+messages as the NatNet SDK's depacketization samples lay them out. Frames and model
+definitions of 3.0 to 4.2 are decoded and encoded, 4.3 and 4.4 decoded with the 4.2 layout,
+frames of the legacy 2.x layouts decoded only. Every decoding problem raises
+:class:`NatNetError` (a ``ValueError``) with a ``reason`` for counters; nothing else escapes.
 
-One module per message, each with the byte layout it reads and writes:
-
-* :mod:`.common` -- the packet header and message ids, versions and which fields each
-  version's frame carries, :class:`NatNetError`, the shared buffer readers;
-* :mod:`.frame` -- FRAMEOFDATA: the section table and the suffix;
-  :mod:`.sections` -- the items in those sections (the rigid body's 38 bytes, ...);
-* :mod:`.model` -- MODELDEF and its description kinds;
-* :mod:`.handshake` -- the sender block, CONNECT, DISCOVERY, SERVERINFO,
-  UNRECOGNIZED_REQUEST;
-* :mod:`.commands` -- REQUEST, RESPONSE, MESSAGESTRING, KEEPALIVE, DISCONNECT, ECHO, ...;
-* :mod:`.packet` -- :func:`serialize` and :func:`deserialize` over all of them;
-* :mod:`.coordinates` -- Motive poses on the planner's ground plane.
-
-Imports point one way only: common <- sections <- frame; common <- model, handshake,
-commands; all of them <- packet <- this package. Everything public is re-exported here:
-callers write ``from trustfg.bridge import natnet`` and ``natnet.decode_frame(...)``.
+One module per message, each with the byte layout it reads and writes: :mod:`.common`
+(header, ids, versions, each version's layout), :mod:`.frame` and :mod:`.sections`
+(FRAMEOFDATA), :mod:`.model` (MODELDEF), :mod:`.handshake` (CONNECT, SERVERINFO, ...),
+:mod:`.commands` (the small requests), :mod:`.packet` (:func:`serialize`,
+:func:`deserialize`) and :mod:`.coordinates` (Motive poses on the ground plane). Imports
+point one way, ``common`` first and ``packet`` last; everything public is re-exported here.
 """
 
 from .commands import (

@@ -1,11 +1,7 @@
 """What every NatNet message shares: the packet header, message ids, versions, the frame
-layout of each version, errors, and the small buffer readers the decoders are built on.
+layout of each version, errors (:class:`NatNetError`, a ``ValueError`` with a ``reason``
+for counters; nothing else escapes a decoder) and the buffer readers the decoders use.
 
-All of NatNet is little-endian. Every decoding problem raises :class:`NatNetError` (a
-``ValueError``) with a ``reason`` for counters; nothing else escapes a decoder.
-
-Packet
-------
 Every datagram is a 4-byte header and a payload, little-endian throughout::
 
     off  type    field
@@ -13,12 +9,9 @@ Every datagram is a 4-byte header and a payload, little-endian throughout::
     2    uint16  payload size in bytes; must equal len(datagram) - 4
     4    ...     payload
 
-Message ids: 0 CONNECT, 1 SERVERINFO, 2 REQUEST, 3 RESPONSE, 4 REQUEST_MODELDEF, 5 MODELDEF,
-6 REQUEST_FRAMEOFDATA, 7 FRAMEOFDATA, 8 MESSAGESTRING, 9 DISCONNECT, 10 KEEPALIVE,
-12 ECHO_REQUEST, 13 ECHO_RESPONSE, 14 DISCOVERY, 100 UNRECOGNIZED_REQUEST.
-
-Strings on the wire (``cstring``) are UTF-8 and NUL-terminated; ``vec3`` is 3 float32
-(m), ``quat`` 4 float32 (qx, qy, qz, qw); counts are int32.
+Message ids are :class:`MessageId`'s. Strings on the wire (``cstring``) are UTF-8 and
+NUL-terminated; ``vec3`` is 3 float32 (m), ``quat`` 4 float32 (qx, qy, qz, qw); counts are
+int32.
 """
 
 from __future__ import annotations

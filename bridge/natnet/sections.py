@@ -1,7 +1,6 @@
-"""The items inside a FRAMEOFDATA's sections: rigid bodies, marker sets, labeled markers,
-skeletons, assets, force plates and devices -- their dataclasses, how one section's items
-are read (or checked and skipped) and how they are written. :mod:`.frame` strings the
-sections together; the section table is there.
+"""The items inside a FRAMEOFDATA's sections (rigid bodies, marker sets, labeled markers,
+skeletons, assets, force plates, devices): their dataclasses, and how one section's items
+are read (or checked and skipped) and written. :mod:`.frame` holds the section table.
 
 A rigid body is, for NatNet 3.0 and later, 38 bytes::
 
@@ -11,9 +10,8 @@ A rigid body is, for NatNet 3.0 and later, 38 bytes::
     32  float32  mean marker error (m)
     36  uint16   params: 0x01 tracking valid (tracked in this frame)
 
-NatNet 2.x inserts after the orientation ``int32 m, m x vec3 marker positions`` and (2.0
-and later) ``m x int32 marker ids, m x float32 marker sizes``; mean error is there from 2.0,
-params from 2.6.
+NatNet 2.x inserts after the orientation ``int32 m, m x vec3 marker positions`` and (2.0 and
+later) ``m x int32 marker ids, m x float32 marker sizes``; mean error from 2.0, params from 2.6.
 """
 
 from __future__ import annotations
