@@ -1,19 +1,15 @@
-"""The dashboard's operator mode: an e-stop button (and release, abort) for the operator.
+"""The dashboard's operator mode (``trustfg dashboard --operator``): an e-stop button, with
+release and abort.
 
-Off unless ``trustfg dashboard --operator``. Then the dashboard is an operator's session
-(fleet.operator.session): it publishes the heartbeat the cars' deadman listens for, and
-``POST /api/operator`` with ``{"action": "estop" | "release" | "abort", "cars": [...]}``
-(no cars: every car) acts on both stop paths, as ``trustfg stop`` does.
-
-Who may press the button: whoever presents the session's token, a random secret made at
-start (or read from ``--token-file``) and printed with the page's address
-(``http://HOST:PORT/?token=...``); the page keeps it and sends it as
-``Authorization: Bearer TOKEN``. A request without it, or with another, is refused (403)
-and counted. On a secure fleet (its bus uses TLS: ``tls/`` endpoints or a
-``zenoh_config``) the token must not cross the network in clear text: operator mode then
-needs HTTPS (``--tls-cert``/``--tls-key``) or a page served on loopback only; and the
-dashboard's own Zenoh identity must be the operator's (its certificate, common name
-``operator``) -- the cars' access control drops an e-stop from anyone else.
+The dashboard is then an operator's session (fleet.operator.session): it publishes the
+heartbeat the cars' deadman listens for, and ``POST /api/operator`` with ``{"action":
+"estop" | "release" | "abort", "cars": [...]}`` (no cars: every car) acts on both stop
+paths, as ``trustfg stop`` does. Only the holder of the session's token (random, or from
+``--token-file``; printed with the page's address) may press it: the page sends it as
+``Authorization: Bearer TOKEN``, and anything else is refused (403) and counted. On a
+secure fleet the token must not cross the network in clear text (HTTPS, or a page on
+loopback), and the dashboard's Zenoh identity must be the operator's: the cars' access
+control drops an e-stop from anyone else (docs/design/links.md, "The dashboard").
 """
 
 from __future__ import annotations

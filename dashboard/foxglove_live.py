@@ -1,11 +1,12 @@
 """``trustfg foxglove --config FILE``: the live fleet for Foxglove, over its WebSocket protocol.
 
 Joins the bus as an observer and serves what it hears with Foxglove's SDK
-(``foxglove.start_server``, subprotocol ``foxglove.websocket.v1``): every fleet message as
-JSON on its key expression, and the scene Foxglove's 3D panel draws (fleet.recording.foxglove_scene:
-the map, the cars, their plans, goals and epsilon circles, frame transforms, a log). In
-Foxglove: *Open connection* -> *Foxglove WebSocket* -> ``ws://HOST:PORT``. The map is sent
-again every few seconds for clients that connect late.
+(``foxglove.start_server``, subprotocol ``foxglove.sdk.v1``, the SDK's name for
+``foxglove.websocket.v1``): every fleet message as JSON on its key expression, and the scene
+Foxglove's 3D panel draws (fleet.recording.foxglove_scene: the map, the cars, their plans,
+goals and epsilon circles, frame transforms, a log). In Foxglove: *Open connection* ->
+*Foxglove WebSocket* -> ``ws://HOST:PORT``. The map is sent again every few seconds for
+clients that connect late.
 
     trustfg foxglove --config deploy/lab/fleet.toml [--port 8766] [--host 127.0.0.1]
 """

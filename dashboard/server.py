@@ -1,20 +1,14 @@
 """``trustfg dashboard``: the fleet, live in a web page (or a recorded run, replayed).
 
-    trustfg dashboard --config FILE [--host H] [--port P] [--listen ENDPOINT] [--operator]
-    trustfg dashboard --replay RUN  [--host H] [--port P]
+A Starlette app: live, it observes the fleet's bus; replaying, it plays an MCAP recording
+at real time. Either way one :class:`~.state.FleetView` is fed, and every open page gets
+its snapshot over a WebSocket at 10 Hz (docs/design/links.md, "The dashboard"). Endpoints:
 
-A Starlette (ASGI) app served by uvicorn. Live, it joins the fleet's Zenoh bus as an
-observer; replaying, it plays an MCAP recording (trustfg.fleet.recording.mcap_file) at real time, with
-play, pause, speed and a time slider. Either way the messages feed one
-:class:`dashboard.state.FleetView`, and every connected page gets a snapshot over a
-WebSocket 10 times a second. The page (dashboard/static) is plain HTML, SVG and
-JavaScript: nothing to build.
-
-    GET /               the page
+    GET /               the page (dashboard/static: plain HTML, SVG and JavaScript)
     GET /api/map        the static map: bounds, obstacles, cars, goals
     GET /api/snapshot   a snapshot made now (what the page draws), as JSON
     POST /api/operator  operator mode only (--operator): e-stop, release, abort, for the
-                        holder of the session's token (dashboard/operator.py says how)
+                        holder of the session's token (dashboard/estop_panel.py)
     WS  /ws             {"type": "map"} once, then {"type": "snapshot"} at 10 Hz; the page
                         may send {"type": "seek", "t": T}, {"type": "play"}, {"type": "pause"},
                         {"type": "speed", "value": X} to drive a replay
@@ -211,7 +205,7 @@ class Dashboard:
             except Exception:  # one bad batch must not stop the page
                 log.exception("dashboard: feeding the view failed")
             last = now
-            if self.clients and now >= next_snapshot:  # no page open: no snapshot (a tenth of a core at 8 cars)
+            if self.clients and now >= next_snapshot:  # no page open: no snapshot (building one takes CPU the fleet shares)
                 next_snapshot = now + SNAPSHOT_PERIOD_S
                 text = json.dumps(self.snapshot())
                 for client in list(self.clients):

@@ -1,21 +1,15 @@
 """What the dashboard knows of the fleet, built from fleet messages alone (pure logic).
 
 :class:`FleetView` takes decoded messages with the time they arrived -- live from the bus
-or replayed from a recording -- and keeps, per car, its latest pose, plan, trust report
-and status, message rates over the last ``RATE_WINDOW_S``, the running minimum distance
-between every pair of cars, and the alerts a person watching should see:
-
-    breach      two cars closer than their breach distance (SafetyConfig) right now
-    low_trust   a car's overall trust in a peer below LOW_TRUST
-    stale_peer  nothing heard from a car for STALE_AFTER_S, or its process left the bus
-    lost_pose   a car reports it does not see itself (pose invalid), or its pose is older
-                than LOST_POSE_AFTER_S
-    clock       a car's clock is more than CLOCK_ALERT_S off, as its peers estimate it
-                (the median of what their status reports; agent.clocks): its plans are
-                still corrected up to trust.clock_tolerance_s, but its NTP needs a look
-
-Positions for the distance matrix come from ground truth when the recording has it
-(``trustfg sim`` runs), else from the poses the cars publish.
+or replayed from a recording -- and keeps, per car, its latest pose, plan, trust report and
+status, message rates over the last ``RATE_WINDOW_S``, the running minimum distance between
+every pair of cars (from ground truth when the recording has it, else from the poses the
+cars publish), and the alerts a person watching should see: ``breach`` (two cars closer
+than their breach distance now), ``low_trust`` (a car's trust in a peer below
+``LOW_TRUST``), ``stale_peer`` (nothing heard from a car for ``STALE_AFTER_S``, or its
+process left the bus), ``lost_pose`` (a car does not see itself, or its pose is older than
+``LOST_POSE_AFTER_S``) and ``clock`` (a car's clock more than ``CLOCK_ALERT_S`` off, the
+median of its peers' estimates: its plans are still corrected, but its NTP needs a look).
 """
 
 from __future__ import annotations

@@ -1,40 +1,16 @@
-"""A NatNet server that stands in for OptiTrack Motive.
+"""A NatNet server that stands in for OptiTrack Motive, encoding with :mod:`bridge.natnet`.
 
-It speaks the same wire format the bridge decodes (it encodes with :mod:`bridge.natnet`):
-
-* the **command socket** (``command_port``, 1510) answers every CONNECT variant and
-  DISCOVERY with SERVERINFO (NatNet 3.0, 3.1, 4.0 or 4.1, chosen by
-  ``NatNetServerOptions.natnet_version``; a client's requested bitstream version is logged
-  and ignored), REQUEST_MODELDEF with MODELDEF (a rigid body description and a marker set
-  per body, plus "all", as Motive lists them), ECHO_REQUEST with ECHO_RESPONSE, REQUEST
-  "FrameRate" with a float32 RESPONSE, REQUEST_FRAMEOFDATA with the latest frame, ignores
-  KEEPALIVE (it only refreshes the client), forgets a client on DISCONNECT, and answers
-  unknown requests and message ids with UNRECOGNIZED_REQUEST carrying its sender block
-  (as Motive does);
-* the **stream** sends FRAMEOFDATA at ``rate_hz`` (120 Hz) to the multicast group, or in
-  unicast mode to every client that connected, from the address it connected from. A
-  unicast client that sends nothing (no KEEPALIVE) for ``client_timeout_s`` is dropped.
-
-Frames are scheduled by absolute deadlines ``t0 + k / rate_hz``; when the stream thread
-falls behind by whole periods, those ticks are skipped (their frame numbers never appear,
-like frames lost on the wire) instead of being sent in a burst. Poses come from
-``get_bodies(t)`` (``t`` = k / rate_hz, seconds since start) returning
-``(id, name, position xyz, quaternion xyzw, tracking_valid)`` per rigid body.
-
-Fault knobs (all off by default): ``drop_rate`` (each frame lost with this probability,
-drawn from the seeded numpy Generator), ``noise_std_m`` (Gaussian noise on tracked
-positions), ``latency_s`` (frames wait in a queue and are released at production time +
-latency; the thread sleeps only until the next tick or release) and ``occlusions``
-(windows in which a body is reported untracked).
-
-Untracked rigid bodies: Motive keeps streaming a rigid body it cannot see. Its params bit
-0x01 (tracking valid) is cleared; users of Motive 2.x report that the pose is the last
-one tracked (PlusToolkit/PlusLib issue #436 and PR #699: out-of-view tools keep "the latest
-valid transform"; the SDK samples test ``params & 0x01``, never the pose). So by default
-(``untracked_pose="last_known"``) an untracked body repeats the last pose sent while it was
-tracked (zeros before it was ever tracked) with mean error 0; ``"zeros"`` sends position
-(0, 0, 0) and the identity quaternion instead, the harsher case for clients that forget to
-check the flag. Either way a client must use the flag, never the pose, to detect loss.
+Its **command socket** (``command_port``, 1510) answers as Motive does: CONNECT and
+DISCOVERY with SERVERINFO, REQUEST_MODELDEF with MODELDEF, ECHO_REQUEST, REQUEST
+"FrameRate", REQUEST_FRAMEOFDATA with the latest frame, DISCONNECT, and anything else with
+UNRECOGNIZED_REQUEST. Its **stream** sends FRAMEOFDATA at ``rate_hz`` to the multicast
+group, or to every unicast client that keeps itself alive, on absolute deadlines: a tick
+it falls behind on is skipped, never sent in a burst. Poses come from ``get_bodies(t)``,
+``(id, name, position xyz, quaternion xyzw, tracking_valid)`` per rigid body. Fault knobs,
+all off by default: ``drop_rate``, ``noise_std_m``, ``latency_s``, ``occlusions``. An
+untracked body streams on with its tracking-valid bit clear and, by default, its last
+tracked pose, as Motive does (``untracked_pose``). Design and sources: docs/design/links.md,
+"mocap-sim: the hardware, simulated".
 """
 
 from __future__ import annotations
@@ -71,7 +47,11 @@ __all__ = ["Occlusion", "NatNetServerOptions", "NatNetServer", "NatNetServerStat
 
 log = logging.getLogger(__name__)
 
-ServedBody = tuple[int, str, Sequence[float], Sequence[float], bool]
+ServedBody = (tuple[int, str, Sequence[float], Sequence[float], bool]
+              | tuple[int, str, Sequence[float], Sequence[float], bool, float])
+"""(id, name, position, quaternion, tracking valid) of a simulated body; with a sixth item,
+its mean marker error (m), a body relayed from another NatNet server: served as it came,
+no noise added (mocap_sim.relay)."""
 BodySource = Callable[[float], Iterable[ServedBody]]
 
 _IDENTITY = (0.0, 0.0, 0.0, 1.0)
@@ -305,7 +285,7 @@ class NatNetServer:
                      camera_data_received_ticks=self._ticks(time.monotonic()))
 
     def _served_body(self, body: ServedBody, t: float) -> RigidBody:
-        body_id, _, position, orientation, valid = body
+        body_id, _, position, orientation, valid, *relayed = body
         body_id = int(body_id)
         o = self.options
         tracked = bool(valid) and not any(occ.covers(body_id, t) for occ in o.occlusions)
@@ -316,6 +296,10 @@ class NatNetServer:
                 pos, quat = self._last_tracked.get(body_id, (_ORIGIN, _IDENTITY))
             return RigidBody(body_id, tuple(pos), tuple(quat), 0.0, False)
         pos = tuple(float(p) for p in position)
+        if relayed:  # a real body's pose and error as its own server gave them: no noise
+            quat = tuple(float(q) for q in orientation)
+            self._last_tracked[body_id] = (pos, quat)
+            return RigidBody(body_id, pos, quat, float(relayed[0]), True)
         if o.noise_std_m > 0.0:
             pos = tuple(float(p) for p in np.asarray(pos) + self._rng.normal(0.0, o.noise_std_m, 3))
         quat = tuple(float(q) for q in orientation)

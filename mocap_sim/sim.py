@@ -1,35 +1,12 @@
 """``trustfg mocap-sim --config FILE``: the lab's hardware, simulated.
 
-For every car of the config: a simulated unicycle (agent.vehicle) that takes the
-same UDP command datagrams as a real car on its ``link`` address, through the very
-receiving logic real firmware runs (bridge.carlink.CommandFilter: the MAC with the car's
-key -- or the CRC of version 1 where a car's config asks for it --, car id, sessions and
-sequence order, 250 ms watchdog, e-stop). A NatNet server (mocap_sim.natnet_server)
-streams every car's pose as Motive would, at the config's NatNet address and ports.
-
-Physics runs at ``--physics-hz`` on absolute deadlines. Ground truth (fleet clock,
-every car's x, y, yaw, v, omega, and the command it is applying, v_cmd and omega_cmd --
-zero once its watchdog, a STOP or an e-stop stops it) goes to ``--ground-truth FILE``
-as CSV at the fleet's command rate (``control.command_rate_hz``); every change of a car's command between zero and non-zero is also
-written, at physics resolution, to ``--command-log FILE`` (t, car_id, v_cmd, omega_cmd).
-
-Fault knobs (all times in seconds since the simulator started):
-  --drop-rate P          drop NatNet frames with probability P
-  --noise M              Gaussian pose noise, standard deviation M metres
-  --latency S            deliver every frame S seconds late
-  --occlude ID:T0:T1     rigid body ID untracked (tracking-valid off) for T0 <= t < T1
-  --cut-link ID:T0:T1    car ID hears no commands for T0 <= t < T1 (its watchdog stops it)
-  --slip S               relative speed noise of the wheels (std)
-  --control-port P       take faults at run time as JSON datagrams on 127.0.0.1:P (or the
-                         NatNet address): {"occlude": BODY, "seconds": S} hides a rigid body
-                         from now for S seconds; {"cut_link": CAR, "seconds": S} makes a car
-                         deaf to its commands; {"reset": true} puts every car back at its
-                         start, standing (the lab's "carry them back" between trials);
-                         anything else is refused and counted
-
-The simulated cars answer PING datagrams as firmware must (bridge.carlink.answer). The
-process prints the ports it bound (NatNet, every car's link, the control port), then
-``READY`` on stdout once the stream runs, and stops cleanly on SIGTERM or SIGINT.
+:class:`MocapSim` gives every car of the config a simulated unicycle (agent.vehicle) behind
+a :class:`~trustfg.bridge.carlink.CommandReceiver` on the car's ``link`` address -- the very
+receiving rules firmware runs, watchdog and e-stop included -- and streams every car's pose
+through a NatNet server (mocap_sim.natnet_server) as Motive would. Physics runs on absolute
+deadlines; ground truth and a log of the cars' commands go to CSV files; a control port
+takes faults at run time. What the command offers its user is :data:`DESCRIPTION` (its
+--help); the design is in docs/design/links.md, "mocap-sim: the hardware, simulated".
 """
 
 from __future__ import annotations
@@ -59,6 +36,41 @@ from .natnet_server import NatNetServer, NatNetServerOptions, Occlusion
 log = logging.getLogger(__name__)
 
 BODY_HEIGHT_M = 0.05
+
+DESCRIPTION = """\
+``trustfg mocap-sim --config FILE``: the lab's hardware, simulated.
+
+For every car of the config: a simulated unicycle that takes the same UDP command
+datagrams as a real car on its ``link`` address, through the very receiving rules real
+firmware runs (the MAC with the car's key -- or the CRC of version 1 where a car's config
+asks for it --, car id, sessions and sequence order, 250 ms watchdog, e-stop). A NatNet
+server streams every car's pose as Motive would, at the config's NatNet address and ports.
+
+Physics runs at ``--physics-hz`` on absolute deadlines. Ground truth (fleet clock,
+every car's x, y, yaw, v, omega, and the command it is applying, v_cmd and omega_cmd --
+zero once its watchdog, a STOP or an e-stop stops it) goes to ``--ground-truth FILE``
+as CSV at the fleet's command rate (``control.command_rate_hz``); every change of a car's
+command between zero and non-zero is also written, at physics resolution, to
+``--command-log FILE`` (t, car_id, v_cmd, omega_cmd).
+
+Fault knobs (all times in seconds since the simulator started):
+  --drop-rate P          drop NatNet frames with probability P
+  --noise M              Gaussian pose noise, standard deviation M metres
+  --latency S            deliver every frame S seconds late
+  --occlude ID:T0:T1     rigid body ID untracked (tracking-valid off) for T0 <= t < T1
+  --cut-link ID:T0:T1    car ID hears no commands for T0 <= t < T1 (its watchdog stops it)
+  --slip S               relative speed noise of the wheels (std)
+  --control-port P       take faults at run time as JSON datagrams on 127.0.0.1:P (or the
+                         NatNet address): {"occlude": BODY, "seconds": S} hides a rigid body
+                         from now for S seconds; {"cut_link": CAR, "seconds": S} makes a car
+                         deaf to its commands; {"reset": true} puts every car back at its
+                         start, standing (the lab's "carry them back" between trials);
+                         anything else is refused and counted
+
+The simulated cars answer PING datagrams as firmware must. The process prints the ports
+it bound (NatNet, every car's link, the control port), then ``READY`` on stdout once the
+stream runs, and stops cleanly on SIGTERM or SIGINT."""
+"""The command's description (``trustfg mocap-sim --help``)."""
 
 
 @dataclass(frozen=True)
@@ -167,7 +179,7 @@ class MocapSim:
         return 0
 
     def _control(self) -> None:
-        """Run-time faults from JSON datagrams (see the module docstring)."""
+        """Run-time faults from JSON datagrams (see :data:`DESCRIPTION`, ``--control-port``)."""
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         sock.bind((self.scenario.natnet.server, self.options.control_port))
         sock.settimeout(0.2)
@@ -278,7 +290,7 @@ class _CsvWriter:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = command_parser("trustfg mocap-sim", __doc__, whole=True,
+    parser = command_parser("trustfg mocap-sim", DESCRIPTION, whole=True,
                             epilog="Times of --occlude and --cut-link are seconds since the simulator started.")
     parser.add_argument("--config", required=True, type=Path, help="fleet config TOML (cars need link addresses)")
     parser.add_argument("--natnet-version", choices=natnet.STREAM_VERSIONS, default=natnet.DEFAULT_STREAM_VERSION,
