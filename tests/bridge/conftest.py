@@ -1,9 +1,8 @@
 """NatNet test helpers: the real Motive captures, a minimal pcapng reader, and the small
 assertion helpers the codec's test modules share.
 
-The captures are test data in ``tests/data/natnet-captures`` (copied from the project's
-shared captures with their licences and SHA256SUMS); a missing file is an error, never
-a skip.
+The captures are test data in ``tests/data/natnet-captures`` (with their licences and
+SHA256SUMS); a missing file is an error, never a skip.
 """
 
 from __future__ import annotations

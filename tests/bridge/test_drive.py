@@ -77,9 +77,9 @@ def held_at_a_wall(scenario, sdf, seconds: float = 6.0) -> tuple[float, float]:
 
 
 def test_a_car_the_guard_holds_turns_to_where_its_plan_goes_and_gets_away(scenario, intersection_sdf):
-    # Held, Kanayama's turn (the plan's curvature times its speed) spun the car further into
-    # the wall and the turn-first rule turned it back: it swung between headings that all
-    # point into the wall, and never moved (random-field-6-a seed 60: 40 s beside a pillar).
+    # Held, Kanayama's turn (the plan's curvature times its speed) would spin the car further
+    # into the wall and the turn-first rule turn it back: it would swing between headings that
+    # all point into the wall and never move (the next test switches the rule off).
     moved, nearer = held_at_a_wall(scenario, intersection_sdf)
     assert moved > 1.0
     assert nearer <= 0.002  # and never into the wall

@@ -49,9 +49,9 @@ def test_only_the_operators_page_stops_the_fleet_and_the_cars_stay_stopped_until
     with sync_playwright() as pw:
         browser = pw.chromium.launch(executable_path=chromium(), args=CHROMIUM_FLAGS)
         try:
-            # Both pages load before the start: the intersection is driven in 10-15 s, and on
-            # a loaded CI machine the browser's start and two page loads once took longer,
-            # so that every car had arrived before the operator's page could stop one.
+            # Both pages load before the start: the intersection is driven in seconds, and on
+            # a loaded machine starting the browser and loading two pages can take longer,
+            # leaving no driving car for the operator's page to stop.
             stranger = browser.new_page()
             stranger.goto(f"http://127.0.0.1:{port}/")
             stranger.wait_for_selector("#estop", state="visible", timeout=20000)
@@ -62,8 +62,8 @@ def test_only_the_operators_page_stops_the_fleet_and_the_cars_stay_stopped_until
             # The stop is timed from the click as the page got it (the event's own stamp), as
             # an operator's mouse click would be: Playwright's checks before it dispatches
             # (visible, stable, hit target: round trips into a page that shares two cores
-            # with the fleet) took 0.5-1.3 s of the 1 s once on a loaded CI machine, and no
-            # real mouse makes them. They are reported below, not bounded.
+            # with the fleet) can take most of the bound on a loaded machine, and no real
+            # mouse makes them. They are reported below, not bounded.
             page.evaluate("""() => document.getElementById("estop").addEventListener("click",
                 e => { window.clickedAt = (performance.timeOrigin + e.timeStamp) / 1000; }, {capture: true})""")
 
@@ -75,7 +75,7 @@ def test_only_the_operators_page_stops_the_fleet_and_the_cars_stay_stopped_until
             time.sleep(0.5)
             # Nothing stopped: every car still driving, and the fleet not held (an accepted stop
             # holds every car within 1 s, below). Not "every car moving": a car waiting its
-            # turn at the crossing commands zero (CI met cars 1 and 2 waiting once).
+            # turn at the crossing commands zero.
             assert set(fleet.states().values()) == {"driving"}, fleet.states()
             assert fleet.moving(), fleet.states()
 

@@ -120,8 +120,7 @@ def test_the_live_page_draws_the_published_poses_trust_and_alerts(live_run):
             print(f"the test's session heard every car {time.monotonic() - t0:.1f} s after the page drew them")
             # Positions: every drawn car sits where that car recently said it is -- once the
             # test has heard the car for HEARD_FOR_S: the page may still draw a pose the car
-            # sent before the test's session joined (a check right after the first pose
-            # heard compared the page with that one pose alone, 2-4 cm on).
+            # sent before the test's session joined, which the test never heard.
             first_heard = {car.id: published.poses[car.id][0][0] for car in fleet.cars}
             checked_moving = False
             deadline = time.monotonic() + 40

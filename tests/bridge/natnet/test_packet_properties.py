@@ -197,6 +197,6 @@ def test_byte_flips_never_escape_and_stay_bounded(seeds, data):
         _, peak = tracemalloc.get_traced_memory()
     finally:
         tracemalloc.stop()
-    # Decoded objects cost a bounded multiple of the bytes they come from; a count that
-    # was believed (2**31 - 1 rigid bodies...) would cost gigabytes.
+    # Decoded objects cost a bounded multiple of the bytes they come from; a count taken on
+    # trust (2**31 - 1 rigid bodies...) would cost gigabytes.
     assert peak < 64 * len(mutated) + 256 * 1024
