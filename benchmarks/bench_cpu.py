@@ -1,37 +1,17 @@
 """CPU of a car process at steady state, with 3, 7 and 15 peers.
 
-    python benchmarks/bench_cpu.py [--scenes circle-4 circle-8 circle-16] [--seed 0]
+    python benchmarks/bench_cpu.py [--scenes circle-4 circle-8 circle-16] [--seed 0] [--focus K]
 
-Runs ``trustfg sim`` (mocap-sim and one OS process per car on this machine, no dashboard)
-on each scene and reads every process's CPU from /proc (fleet.cpu: utime + stime of the
-process and all its threads, with its command loop: fleet.car.velocity_loop). Steady state is the window from the go (the
-start message's lead, ``sim.settle_s``, after it: every car plans against every peer from
-then on, including the ones still waiting to depart) to the first car's arrival (from then on the fleet thins out); a car's share of one
-core is its CPU time over that window divided by the window's wall time. Printed per
-scene: the mean, min and max over the car processes, and the sum over every process of
-the run (mocap-sim, the launcher and the cars) against the machine's cores -- near the
-core count the cars were starved and their shares are capped, not their demand.
+Runs ``trustfg sim`` on each scene (no dashboard) and reads every process's CPU from /proc
+(fleet.cpu: a car process with its velocity loop). Printed per scene: each car's share of
+one core from the go to the first arrival (mean, min, max), and the sum over every process
+against the machine's cores -- near the core count the shares are capped, not the demand.
+Then where a car's CPU goes while it drives (``cpu_driving``: the main thread by section of
+its loop, its other threads, the velocity loop), and the replans' CPU by how each ended.
 
-Then where a car's CPU goes while it drives (each car's own window, from its departure
-to its arrival: ``cpu_driving`` in the car's ``--stats``, fleet.cpu.breakdown), as shares
-of one core averaged over the cars: the main thread by section of its loop (replan,
-evidence, messages in, frames, publishing, feeding the command loop, the loop's own
-passes and waits), the car process's other threads (Zenoh's; a NatNet socket thread, had
-the client one), and the command loop process (its ticks, and any other thread of it).
-Last, the replans' CPU over the run by how each ended (first try, retry, fallback, kept:
-``replan_cpu`` in the car's ``--stats``), summed over the cars: count, CPU per replan and
-share of all replanning; and what the first plan broke in the replans where it failed
-verification (``first_broke``: the limits, a peer, a wall, or several).
-Both NatNet clients are pulled by their readers (bridge.natnet_client, "Pull"): their
-work is in the main thread's "frames" and in the loop's ticks.
-
-``--focus K``: every car process but car K's runs at nice 19 (their command loops keep
-their real-time priority). On cores the fleet fills, every car's share is capped at what
-the machine gives it, not what it would take; with the others yielding, car K takes what
-it needs, so its share (and its breakdown, printed apart) is a car's demand with that
-many peers. The other cars then share what car K leaves, about what each gets when all
-are equal (two cores, eight cars: 0.2 of a core each), so the scene it plans in stays
-much the same.
+``--focus K`` runs every car process but car K's at nice 19 (their velocity loops keep
+their priority): car K then takes what it needs, so its share is a car's demand with that
+many peers. Results: docs/results/performance.md#cpu-of-a-car-process.
 """
 
 from __future__ import annotations

@@ -1,24 +1,16 @@
 """E-stop latency in ``trustfg sim``: from ``trustfg stop`` to every car applying zero.
 
-    python benchmarks/bench_estop.py [--stops 20] [--bus-stops 5] [--seed 0] [--out FILE]
+    python benchmarks/bench_estop.py [--stops 20] [--bus-stops 5] [--session-stops 5] [--seed 0] [--out FILE]
 
-Runs ``trustfg sim --stay`` (mocap-sim, four car processes, the launcher) and joins its bus
-as the operator (fleet.operator.session.OperatorSession). Then, round after round: start a trial,
-wait a random moment while the cars drive (U(1, 4) s after the departure, drawn from
-``--seed``), run ``trustfg stop --config RUN/fleet.toml`` as a fresh process, as an operator
-types it, and measure from just before that process is started until every car that was
-moving applies a zero command for good (mocap-sim's command log, 5 ms physics ticks); check
-that every car stays at zero for a second (and after its process is resumed, see below);
-release; carry the cars back to their starts (mocap-sim's reset); next round.
-
-In every fourth round the car processes are SIGSTOPped just before the stop, which then
-goes ``--path link`` only: the direct path with no car process's cooperation; the
-processes are resumed after a second -- they never heard of the stop and command motion
-again -- and the cars must still hold until the release. ``--bus-stops`` more rounds use
-``--path bus`` only, to show the bus path alone (a fresh process first opens its Zenoh
-session), and ``--session-stops`` rounds stop from the benchmark's own running operator
-session, as ``trustfg go``'s stop key and the dashboard's button do (measured from the
-call). Prints the table the README quotes.
+Runs ``trustfg sim --stay`` with four cars and joins its bus as the operator. Each round
+starts a trial, waits a random moment while the cars drive (U(1, 4) s after the departure,
+from ``--seed``), runs ``trustfg stop`` as a fresh process and times from just before its
+start until every moving car applies zero for good (mocap-sim's command log, 5 ms ticks);
+every car must then hold for a second; release; back to the starts. Every fourth round
+freezes the car processes (SIGSTOP) first and stops with ``--path link`` alone; resumed,
+they command motion again and the cars must still hold. ``--bus-stops`` rounds use the bus
+path alone, ``--session-stops`` rounds the benchmark's own operator session (as ``trustfg
+go``'s stop key does). Results: docs/results/performance.md#e-stop.
 """
 
 from __future__ import annotations

@@ -1,20 +1,14 @@
 """How long planning holds the Python interpreter, and how late a 50 Hz loop beside it runs.
 
-    python benchmarks/bench_gil.py [--peers 3 15] [--seconds 10]
+    python benchmarks/bench_gil.py [--peers 3 15] [--seconds 10] [--switch-ms 1]
 
-The car process runs its 50 Hz command loop in a thread beside the main thread's
-replanning (fleet.car.process). Python threads share one interpreter lock (the GIL):
-while the planner runs Python (our factors' callbacks, numpy calls) the interpreter may
-switch threads every ``sys.getswitchinterval()`` (the car process sets 1 ms), but while
-GTSAM's C++ (elimination, LM's bookkeeping) runs inside a call that does not release the
-lock, no Python thread can run at all.
-
-Here the main thread replans at 5 Hz exactly as a car does (warm replans of the
-intersection scene's car 1 against 3 or 15 peers, N = 41, a cold plan every 2 s), while
-(a) a probe thread sleeps 0.5 ms over and over, recording how much longer than that each
-sleep took (how long it waited for the interpreter once awake, plus the OS's scheduling),
-and (b) a 50 Hz ticker thread (fleet.car.ticker, as the command loop uses it) records how
-late each tick ran. Without the planner both stay well under a millisecond.
+Python threads share one interpreter lock: while GTSAM's C++ runs inside a call that does
+not release it, no other Python thread runs. This is why a car's velocity loop is a
+process of its own (fleet.car.velocity_loop), not a thread beside the planner. Here the
+main thread replans at 5 Hz as a car does (warm replans of the intersection's car 1 against
+3 or 15 peers, N = 41, a cold plan every 2 s) while a probe thread sleeps 0.5 ms over and
+over, recording how much longer each sleep took, and a 50 Hz ticker thread
+(fleet.car.ticker) records how late each tick ran.
 """
 
 from __future__ import annotations

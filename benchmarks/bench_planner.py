@@ -2,39 +2,16 @@
 
     python benchmarks/bench_planner.py [--repeats R]
 
-Scenario: the intersection; car 1 (south -> north) plans against the shared plans of
-cars 2, 3 and 4, all timed to reach the middle together, so the proximity hinges are
-active; with 15 peers, 12 more follow them 2.5 s, 5 s, 7.5 s and 10 s later on their
-approaches (queues). "cold" solves from the seeded route (coarse to fine); "warm" is a
-receding-horizon replan every 0.2 s, warm-started from the previous plan (what a car
-does at 5 Hz). N = 21 and N = 41 support states, 4 interpolated checks per interval.
-"(out)" counts the peers the planner left out as out of reach (none in this small scene).
-Each cold and warm replan is the whole of what a car does (agent.safe_plan): optimise,
-verify (agent.verify), and retry or fall back when the plan fails; "outcomes" counts how
-the replans ended, "verify" is the check alone, and "plan only" the optimiser without it.
-
-Per iteration: the wall time of one real Levenberg-Marquardt iteration (``iterate()``:
-linearise, damped solve, error at the new point), from the seeded route at full
-resolution, with the smallest initial lambda (the planner's, times 10^k) at which LM
-accepts its first trial step there, in both graphs (checked): a step costs the same
-whatever lambda is, and a rejected one would add a second solve. Times are wall and CPU
-(``time.process_time``): on a shared machine the OS gives other processes turns in the
-middle of a millisecond-long call, which wall time counts and CPU time does not.
-
-The floor: the same graph with every one of our Python CustomFactors replaced by a
-GTSAM-native factor on the same keys with exactly as many rows -- a LinearContainerFactor
-holding a fixed JacobianFactor -- so linearising, evaluating and solving cost what GTSAM
-alone costs. Our interval checks are chunked, several consecutive intervals per factor
-(``PlannerConfig.intervals_per_factor``, agent.interval_factors), so the floor is chunked
-the same way: one native factor per chunk, on the chunk's keys, dense over them with the
-chunk's rows, as GTSAM holds ours. "x floor" is our time per iteration over the floor's:
-the two are timed in turns and the median of the turns' ratios is printed
-(``lm_iterations_paired``).
-
-"x frozen": our iteration over that of our own graph with each of our factors frozen into
-a native one at the same point (``frozen_graph``: GTSAM gets our very Jacobians and
-residuals, without calling Python), timed in turns the same way: the part of "x floor"
-that is the price of a Python factor (the rest is the linear system's structure).
+The intersection's car 1 plans against cars 2-4, timed to meet it in the middle (with 15
+peers, queues of 12 more behind them), N = 21 and 41 support states. "cold" and "warm" are
+whole replans (agent.safe_plan: optimise, verify, retry or fall back; a warm one every
+0.2 s from the previous plan), "verify" the check alone, "plan only" the optimiser alone.
+"LM iteration" is one Levenberg-Marquardt ``iterate()`` from the seeded route, against the
+floor: the same graph with every Python factor replaced by a native factor of the same
+keys and rows (``native_floor_graph``). "x floor" is ours over the floor's; "x native copy"
+ours over a native copy of our own graph, each factor held as its own linearisation at the
+same point (``native_copy_graph``): the price of calling Python factors. Both ratios are
+medians of turns timed in pairs. Results: docs/results/performance.md#planner.
 """
 
 from __future__ import annotations
@@ -126,7 +103,7 @@ def native_floor_graph(request, config, sdf, t0, dt):
     return graph
 
 
-def frozen_graph(ours, values):
+def native_copy_graph(ours, values):
     """Our graph with every CustomFactor of ours replaced by its own linearisation at
     ``values``, held by a native LinearContainerFactor: the same keys, rows and numbers
     GTSAM gets from us at that point, without the calls into Python. An iteration of it
@@ -244,15 +221,15 @@ def run(n_states: int, n_peers: int, repeats: int) -> dict:
     floor_graph = lambda: native_floor_graph(request, config, sdf, t0, dt)  # noqa: E731
     assert first_step_accepted(ours_graph, values, lam) and first_step_accepted(floor_graph, values, lam)
     ours, floor, ratio = lm_iterations_paired(ours_graph, floor_graph, values, lam, repeats * 4)
-    frozen = lambda: frozen_graph(ours_graph(), values)  # noqa: E731
-    assert first_step_accepted(frozen, values, lam)
-    _, _, over_frozen = lm_iterations_paired(ours_graph, frozen, values, lam, repeats * 4)
+    native_copy = lambda: native_copy_graph(ours_graph(), values)  # noqa: E731
+    assert first_step_accepted(native_copy, values, lam)
+    _, _, over_native_copy = lm_iterations_paired(ours_graph, native_copy, values, lam, repeats * 4)
     return {"N": n_states, "peers": n_peers, "left_out": plain.peers_out_of_reach, "cold_ms": cold_ms,
             "cold_iterations": cold.result.iterations,
             "warm_ms": (statistics.median(warm_wall), statistics.median(warm_cpu)),
             "warm_iterations": statistics.median(iterations), "verify_ms": verify_ms,
             "plan_only_ms": (plan_only_ms[0], statistics.median(warm_plan_only)), "outcomes": dict(outcomes),
-            "ours_iter_ms": ours, "floor_iter_ms": floor, "x_floor": ratio, "x_frozen": over_frozen}
+            "ours_iter_ms": ours, "floor_iter_ms": floor, "x_floor": ratio, "x_native_copy": over_native_copy}
 
 
 def main() -> None:
@@ -263,7 +240,7 @@ def main() -> None:
     print("cold and warm are whole replans: optimise + verify (+ retries or fallback when it fails);")
     print("verify: the check alone (wall / CPU); plan only: the optimiser alone, cold / warm (wall)")
     print(f"{'N':>3} {'peers':>5} {'(out)':>5} {'cold':>11} {'(iters)':>7} {'warm':>9} {'(iters)':>7} "
-          f"{'verify':>9} {'plan only':>9} {'LM iteration':>12} {'floor':>9} {'x floor':>11} {'x frozen':>11}"
+          f"{'verify':>9} {'plan only':>9} {'LM iteration':>12} {'floor':>9} {'x floor':>11} {'x native copy':>13}"
           "   outcomes")
     for n, peers in ((21, 3), (41, 3), (41, 15)):
         r = run(n, peers, args.repeats)
@@ -273,7 +250,7 @@ def main() -> None:
               f"{r['cold_iterations']:>7} {pair(r['warm_ms'], '.1f'):>9} {r['warm_iterations']:>7.0f} "
               f"{pair(r['verify_ms'], '.2f'):>9} {pair(r['plan_only_ms'], '.1f'):>9} "
               f"{pair(r['ours_iter_ms'], '.2f'):>12} {pair(r['floor_iter_ms'], '.2f'):>9} {pair(ratio, '.2f'):>11}"
-              f" {pair(r['x_frozen'], '.2f'):>11}"
+              f" {pair(r['x_native_copy'], '.2f'):>13}"
               f"   {r['outcomes']}")
 
 

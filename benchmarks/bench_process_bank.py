@@ -3,19 +3,15 @@
     python benchmarks/bench_process_bank.py [--scenes circle-8 circle-obstacles-8 warehouse-8]
                                             [--seeds 5] [--out DIR]
 
-Runs ``trustfg sim`` (mocap-sim, one OS process per car and its command loop, the
-launcher; no dashboard) on each scene for seeds 0..N-1, one run after the other, and
-prints each run's line and the totals over all of them: runs with every car at its goal,
-cars at goal, breaches, the least clearance between cars (edge to edge) and from the
-walls, crashes, commands (rate, lateness p99), replan p95 per car, ticks on a lapsed
-permit, makespans, how busy the machine was (``summary.json`` ``machine``) and each
-car's share of one core. On a machine with fewer cores than the fleet needs the runs are
-starved (``trustfg sim`` says "saturated"): that is what they test -- the safety layers
-must hold while the processes above them wait for a core. About 25 minutes for the 15
-default runs on 2 cores; run it with nothing else on the machine.
-
-A run that does not start (a car that never comes up) is reported and counted, and the
-next one runs.
+Runs ``trustfg sim`` (no dashboard) on each scene for seeds 0..N-1, one run after the
+other, and prints each run's line and the totals: runs with every car at its goal, cars at
+goal, breaches, the least clearance between cars and from the walls, crashes, command rate
+and lateness, replan p95, ticks on a lapsed permit, makespans, how busy the machine was
+and each car's share of a core. With fewer cores than the fleet needs the runs are starved
+(``trustfg sim`` says "saturated"): that is what they test -- the safety layers must hold
+while the processes above them wait for a core. Run it with nothing else on the machine;
+a run that does not start is reported and counted. Results:
+docs/results/performance.md#fleets-as-os-processes.
 """
 
 from __future__ import annotations

@@ -2,22 +2,15 @@
 
     python benchmarks/bench_soak.py [--minutes 30] [--interval 10] [--out DIR]
 
-Starts ``trustfg sim --laps 100000 --timeout MINUTES*60`` (mocap-sim, four car processes,
-the dashboard, the launcher recording every message) and samples every process of the run
-from /proc every ``--interval`` seconds: resident memory (VmRSS), open file descriptors
-(/proc/PID/fd), threads and CPU time, and the whole machine's busy time (/proc/stat), so
-load from outside the run is told apart from the run's own. The car processes report the p99 lateness of their 50 Hz
-control ticks minute by minute (car_N.json, ``late_ms_p99_by_minute``).
-
-Verdicts, per process, measured from the end of the first minute after the go:
-
-    RSS growth    (RSS at the end - RSS at minute 1) / RSS at minute 1      <= 5 %
-    fd growth     fds at the end - fds at minute 1                         <= 0
-    lateness      p99 of the last 5 minutes vs minutes 2-6 (car processes): no more than
-                  1 ms or 25 % worse, whichever is larger
-
-Prints a table and writes DIR/soak.json (every sample). Exit status 0 when every verdict
-holds. Run it alone on the machine: other load shows up as lateness.
+Starts ``trustfg sim --laps 100000`` (four car processes, the dashboard, the launcher
+recording every message) and samples every process of the run from /proc every
+``--interval`` seconds: resident memory, open file descriptors, threads and CPU time, and
+the whole machine's busy time, so load from outside the run is told apart. Verdicts per
+process, from the end of the first minute after the go: RSS growth at most 5 %, fd growth
+at most 0, and (car processes, from their ``late_ms_p99_by_minute``) tick lateness p99 of
+the last 5 minutes no more than 1 ms or 25 % worse than minutes 2-6. Prints a table,
+writes DIR/soak.json and exits 0 when every verdict holds. Run it alone on the machine.
+Results: docs/results/performance.md#soak.
 """
 
 from __future__ import annotations

@@ -1,30 +1,17 @@
-"""How often Zenoh peers that open their sessions at once lose a subscription or a
-liveliness token.
+"""How often Zenoh peers that open their sessions at once lose a subscription or a token.
 
-    python benchmarks/bench_zenoh_start.py [--starts 50] [--peers 4] [--dial all|lower] [--watch silent|behind] [--tcp-only]
+    python benchmarks/bench_zenoh_start.py [--starts 50] [--peers 4] [--seconds 6] [--dial all|lower]
+                                           [--watch silent|behind] [--tcp-only]
 
-Bare Zenoh sessions, no trustfg code on the wire: each start opens ``--peers`` peer-mode
-sessions in their own OS processes on loopback (a TCP and a UDP ``?rel=0`` endpoint each,
-multicast scouting off), every peer dialling every other (``--dial lower``: only the higher
-id dials). Each subscribes to every peer's ``plan`` (an advanced subscriber with history and
-recovery, as fleet.bus.session does) and ``status`` (plain), and for ``--seconds`` publishes a
-plan-sized sample on both plan paths and a status every 0.1 s. A start is *lost* when some
-peer heard nothing of some kind of some other peer in the last second.
-
-``--watch behind`` adds fleet.bus.session's rule (``fleet.bus.session.silent_kinds``: a kind silent for
-SILENT_S from a live peer, or a plan BEHIND_S behind the peer's status, is subscribed
-again, at most every RESUBSCRIBE_EVERY_S); ``--watch silent`` the rule without the second
-part, as it was before stop 31. Each start reports the longest a peer's plans went
-unheard after the first second ("plan silence"): a lost subscription shows there until it
-is mended. Load the cores (e.g. two busy loops) to see losses more often: on 2 cores
-under load, Zenoh 1.10.2 lost a subscription in 4 of 76 starts dialling all, 1 of 76
-dialling lower; with a watch (silence of 1 s there), 0 of 19.
-
-Each peer also declares a liveliness token (``<prefix>/<id>/alive``, as fleet.bus.session does)
-and a liveliness subscriber with history: a token *missed* is one some peer never saw by
-the end, though it hears that peer's samples. ``--tcp-only`` leaves out the UDP endpoints
-(stop 28: two fleet.bus.session sessions with both endpoints missed a token in about 0.9 % of
-starts, with TCP alone in none of 400; a token declared again did not repair it).
+Bare Zenoh sessions, no trustfg code on the wire: each start opens ``--peers`` peers in
+their own processes on loopback (a TCP and a UDP ``?rel=0`` endpoint each, multicast
+scouting off; ``--dial lower``: only the higher id dials). Each subscribes to every peer's
+plans (advanced subscriber, as fleet.bus.session) and status, publishes both every 0.1 s,
+and declares a liveliness token. A start is *lost* when some peer heard nothing of some
+kind of another in the last second; a token is *missed* when a peer never saw it though it
+hears that peer. ``--watch`` adds fleet.bus.session's rule (``silent_kinds``; ``silent``:
+without its plans-behind part); "plan silence" is the longest a peer's plans went unheard.
+Load the cores to see more losses. Results: docs/results/zenoh-liveliness.md.
 """
 
 from __future__ import annotations
