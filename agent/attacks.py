@@ -1,5 +1,5 @@
-"""How a liar lies: the attack suite, for experiments (config.attacks names and documents
-every attack and its parameters).
+"""How a liar lies: the attack suite, for experiments (agent.config.attacks names and
+documents every attack and its parameters).
 
 A liar plans and drives on its true plan (except ``framing``, which steers the car). What
 it tells the fleet is a function of that true plan, the time, its own seeded generator
@@ -8,21 +8,7 @@ into the plan and stamp it publishes, :meth:`Liar.testimony` its honest trust re
 the one it publishes, :meth:`Liar.steer` its planning request into the one it solves.
 Several attacks joined by ``+`` apply in the order named.
 
-Plan lies, each checked by a defence (docs/architecture.md, "Trust"):
-
-    displaced      a fraction p of plans moved 0.4-0.8 m       lag-0 check, rejection
-    forged-future  stamps shift_s ahead, and displaced           clock estimate, future refusal
-    forged-past    stamps shift_s behind, and displaced          clock estimate, lag-0 check
-    bias           0.14 m away from a victim, every plan         below the tolerance: the
-                                                                 peer margin covers it
-    false-future   true now, bends 0.6 m sideways later          audit of the plan's future
-    false-yield    announces it stops, drives on                 audit of the plan's future
-    on-off         displaced in bursts, honest in between       forgetting is slow to forgive
-    replay         an old plan of its own, re-timed as new       lag-0 check
-    framing        tailgates a victim, testifies it is unsafe    blame on the car that closes
-
-Testimony lies: ``false-testimony`` (swap), ``slander``, ``praise``, ``collude`` (praise
-each other, slander the rest) -- bounded by the fusion rules of agent.trust.
+Every attack, and the defence that stops it: docs/design/trust.md, "The attack suite".
 """
 
 from __future__ import annotations

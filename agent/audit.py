@@ -1,49 +1,16 @@
 """Holding plans to what they said: every plan is compared with where its sender is seen,
 at its stamp and then again as each of its future times comes.
 
-A plan message claims where its sender is at its stamp (lag 0) and where it will be after
-(lag h > 0). A car that tells the truth now and lies about later (it announces it yields
-and does not, or its path bends away from where it will drive) passes any check of the
-present; its false future is exposed only when that future comes. So a peer's plans are
-kept (:class:`Ledger`, at most ``audit_max_plans`` per peer, each until its horizon has
-passed) and checked every ``audit_period_s`` of their future, up to ``audit_horizon_s``,
-against the observation of that moment:
+A car that tells the truth now and lies about later passes any check of the present, so
+a peer's plans are kept (:class:`Ledger`) and checked every ``audit_period_s`` of their
+future, up to ``audit_horizon_s``, against the observation of that moment; the tolerance
+grows with the lag (:func:`tolerance`), as honest futures change when cars replan. At
+the stamp a miss beyond the tolerance is a whole failure; later misses are graded and
+add at most one failure per plan. A plan is held only until ``audit_notice_s`` after its
+sender's next plan -- or after a lost plan's earliest stamp, which may have carried that
+notice. :func:`first_false_claim` runs the same rules on the truth, for experiments.
 
-    miss(h) = |p_plan(t_stamp + h) - p_seen(t_stamp + h)|
-    tolerance(h) = transparency_tolerance_m + h * audit_tolerance_growth_mps
-    reject(h)    = plan_reject_m            + h * audit_tolerance_growth_mps
-
-The tolerance grows with the lag because an honest car's future changes when it replans
-(measured: up to 0.12-0.15 m at 1-2 s in the 4-car scenes, 0.34-0.50 m in the 8-car
-intersection); a lie of 0.6 m is twice the tolerance at 1 s.
-
-Evidence per plan (agent.trust): the check at lag 0 is one piece of transparency
-evidence, a success within the tolerance and a whole failure beyond it: a car knows
-where it is, so its claim of the present misses only by its pose's age and its clock's
-residual error times its speed, and the mocap's noise (the check reads where it was seen
-at the stamp, not when the plan arrived), and a claim beyond the tolerance is false, not
-imprecise (graded from 1x to 2x the tolerance, as the future's checks are, a replaying
-liar's claims 0.2-0.28 m off counted 0.4-0.9 of a failure, and it went unseparated from
-honest cars for 4 s). Later checks grade the miss (0 up to the tolerance, 1 from twice
-it, linear in between: an honest car's future moves when it replans), can only add
-failure, and at most one failure per plan in all (the worst graded miss so far, the
-increase recorded as soon as it appears): a plan that comes true earns no second
-success, and a plan that does not costs as much as a plan that lied at once. A check
-whose moment has no observation (the peer was not seen then) is skipped.
-
-Lost notices. A plan is held to its word only until ``audit_notice_s`` after the next
-plan's stamp. When plan messages of the peer were lost (a gap in its sequence numbers),
-the next plan may have been among them, so the last plan received is held only until
-notice after the earliest stamp a lost plan could have had: one replan period
-(``control.replan_period_s``) after it. And until the next plan arrives, the checks of
-the newest plan beyond that point wait: whether its notice was lost is known only then
-(or after ``audit_horizon_s`` of silence, when the plan is held to its word; a peer
-silent for ``stale_after_s`` is kept at the widest epsilon long before). Without this,
-an honest car that changed its mind while its next few plans were lost (30 % loss: 4 in
-a row about once a minute per pair) is held to its old plan for seconds and distrusted.
-A liar that skips sequence numbers on purpose gains no more than by really replanning
-every period (a plan is then held for a period plus the notice anyway), and one that
-falls silent is held to its last plan after the silence.
+docs/design/trust.md, "The audit" and "Lost notices".
 """
 
 from __future__ import annotations

@@ -1,8 +1,7 @@
 """One car's mind: what it sees, what it believes of its peers, what it plans and what it shares.
 
-Pure logic, no I/O: the in-process fleet (fleet.sim.in_process) and the car process hand
-it observations and decoded messages and ask it for plans and reports at the times they
-choose. All times are seconds on the fleet clock. It reads as four steps:
+Pure logic, no I/O: the in-process fleet and the car process hand it observations and
+messages, and ask it for plans and reports (times: seconds, fleet clock). Four steps:
 
 * see: :meth:`CarAgent.observe` keeps every car's sightings (agent.sightings);
 * believe: :meth:`CarAgent.receive` takes peers' plans and testimonies (agent.evidence),
@@ -11,8 +10,8 @@ choose. All times are seconds on the fleet clock. It reads as four steps:
   trust earns, verified, with its fallback (agent.safe_plan, agent.deadlock);
 * share: :meth:`CarAgent.plan_message` and :meth:`CarAgent.trust_message`.
 
-How peers' plans are believed, seen standing, kept plans and the fleet's consensus are
-told in docs/design/trust.md and docs/design/planner.md.
+docs/design/trust.md, "Which plan is believed" and "Seen standing"; docs/design/planner.md,
+"Replanning and consensus" and "Kept plans".
 """
 
 from __future__ import annotations
@@ -156,7 +155,7 @@ class CarAgent:
 
     def gather_evidence(self, now: float) -> None:
         """Safety and consistency evidence about every seen peer, and the audits of their
-        plans (rate-limited: agent.evidence.Witness)."""
+        plans (rate-limited: agent.witness.Witness)."""
         self.witness.gather(now, self.tracks, self.peers, self.trust, self.counters)
 
     # --- planning ---------------------------------------------------------------------------

@@ -1,22 +1,12 @@
 """Peers' clocks: how far each runs ahead of ours, estimated from its stamps.
 
-Plans carry absolute times on the sender's clock. A peer whose clock runs delta ahead of
-ours stamps a message sent at our time s with s + delta, and we receive it at s + d
-(d > 0 the network's latency), so each message gives one sample
-
-    stamp - arrival = delta - d   <=   delta.
-
-The largest sample of the last ``clock_window_s`` is the estimate (as NTP keeps the
-sample with the least delay): it is delta less the least latency seen, so a few
-milliseconds low on a LAN, and delayed or bunched messages (TCP under loss) cannot pull it
-down. It is clipped to +- ``clock_tolerance_s``; a stamp further ahead than that is
-refused (agent.car_agent). Received plans are moved onto our clock by the estimate before
-they are checked or planned against, so an honest car whose clock is off is neither
-distrusted nor misplaced.
-
-A liar controls its stamps, so it controls this estimate, but only within the tolerance and
-only for all its messages at once: a constant shift is corrected like an honest offset
-(its plans are then checked at the right time), a varying one makes its true plans miss.
+A peer whose clock runs delta ahead of ours stamps a message sent at our time s with
+s + delta, and we receive it at s + d (d > 0 the network's latency), so each message
+gives one sample stamp - arrival = delta - d <= delta. The largest sample of the last
+``clock_window_s`` is the estimate (as NTP keeps the sample with the least delay),
+clipped to +- ``clock_tolerance_s``; received plans are moved onto our clock by it
+before they are checked or planned against, so an honest car whose clock is off is
+neither distrusted nor misplaced. docs/design/trust.md, "Clocks".
 """
 
 from __future__ import annotations

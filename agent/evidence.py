@@ -1,32 +1,13 @@
 """What a car makes of a peer's plans and motion: which plan to believe, and the evidence.
 
 Pure, with no clock of its own: CarAgent hands in what arrived and what was seen, and the
-times (ours) it happened.
-
-A plan message goes through, in order (docs/architecture.md, "Trust"):
-
-1. The peer's clock (agent.clocks): its stamp feeds the peer's offset estimate. A stamp
-   more than ``clock_tolerance_s`` ahead of our clock is refused and counted, and is a
-   transparency failure: a plan from the future cannot be checked, and no honest clock is
-   that far off. Otherwise the plan is moved onto our clock by the estimate.
-2. Too late (older than ``stale_after_s``): dropped unjudged.
-3. The audit (agent.audit): the plan joins its sender's ledger and is checked at its
-   stamp at once if we saw the sender then, else as soon as we do. Until that check, the
-   plan is *unverified*: we keep planning against the last verified plan while it is
-   fresh, and against the unverified one only at the widest epsilon -- never as if it
-   were trusted. A plan that passes is the peer's accepted plan; one that misses by more
-   than ``plan_reject_m`` is refused. A future that does not come true is evidence
-   against its sender (and counted past reject(lag)), which widens its epsilon; the plan
-   is not withdrawn: the newest plan is still the best guess of where the peer goes, and
-   dropping it for a prediction from motion would jolt every plan made around it.
-
-With ``reject_plans`` off (the paper's baseline) every plan is believed as it arrives;
-the evidence is gathered all the same.
-
-Safety evidence blames only the car that closes a gap (:func:`safety_verdict`): of two cars
-closer than their breach distance, one that drives towards the other faster than
-``blame_closing_mps`` fails, one that stands or drives away does not, so a tailgater
-cannot frame the car it follows.
+times (ours) it happened. A plan message (:func:`take_plan`) feeds its sender's clock
+estimate (agent.clocks) -- a stamp too far in the future is refused, a transparency
+failure -- is dropped if too late, and joins the audit (agent.audit): until it is checked
+at its stamp it is planned against only at the widest epsilon; one that passes is the
+peer's accepted plan, one that misses by more than ``plan_reject_m`` is refused
+(:func:`belief`). Safety evidence blames only the car that closes a gap
+(:func:`safety_verdict`). docs/design/trust.md, "Which plan is believed" and "Safety".
 """
 
 from __future__ import annotations
@@ -72,7 +53,7 @@ class PeerView:
     """Evidence ticks (t) at which, as we see the fleet, the peer could not drive its plan:
     its proximity guard held it below the speed the plan announced (agent.guard), or it
     faced too far from where the plan went and turned on the spot first (bridge.trajectory_controller):
-    then it is held only to going no faster than it said (agent.car_agent)."""
+    then it is held only to going no faster than it said (agent.consistency)."""
     lost: deque = field(default_factory=lambda: deque(maxlen=32))
     """(earliest, latest) stamp (our clock) a plan of the peer's that we lost could have
     had, from gaps in its sequence numbers, or that came too late to use: a change of

@@ -1,52 +1,17 @@
 """Trust in peers: Beta reputation per dimension, evidence, testimony fusion, epsilon.
 
-For every peer b and dimension d in (safety, consistency, transparency) an agent holds a
-Beta(alpha, beta) belief that "b behaves well", built from its own observations (the
-Beta Reputation System, Josang & Ismail 2002):
+For every peer and dimension (safety, consistency, transparency) a :class:`TrustBook`
+holds a Beta(alpha, beta) belief that the peer behaves well, forgetting towards the
+prior (the Beta Reputation System); tau = (alpha + 1) / (alpha + beta + 2), and overall
+trust is the weakest dimension. Testimonies are fused as dependent evidence that can make
+a car more careful, never less (:meth:`TrustBook.fused`). The transparency trust widens
+the safety distance (paper Sec. III.D, IV.C):
 
-    alpha <- prior_a + lambda^dt (alpha - prior_a) + s
-    beta  <- prior_b + lambda^dt (beta - prior_b) + f           (forgetting towards the prior)
-    tau   = (alpha + 1) / (alpha + beta + 2)                     (expected value)
+    eps_ab = eps_0 * g(q),   g(tau) = 1 + (g_max - 1) * clip((tau_full - tau) / (tau_full - tau_floor), 0, 1)
 
-with s, f in [0, 1] the graded success/failure of one piece of evidence. A detected
-failure of transparency or safety weighs ``failure_weight`` times a success: a peer that
-lies in 40 % of its messages is honest in 60 %, and a lie costs far more than a truth
-earns. A consistency failure weighs ``consistency_failure_weight`` (1): cars replan, and
-a changed mind is not a lie.
-
-Testimonies (the paper's Bayesian consensus): every agent publishes its DIRECT evidence
-only (fused values are never re-published, so rumours cannot loop). Every car of a fleet
-sees the same motion capture and hears the same broadcast plans, so a testimony mostly
-repeats evidence the receiver holds already; adding it (cumulative fusion) would count
-the same observations once per reporter, and lets a reporter inflate its claim. So a
-receiver a fuses testimonies about peer b as dependent evidence:
-  * a reporter's word about itself or about the receiver is ignored;
-  * a testimony claims at most ``testimony_max_evidence`` per dimension (inflation is cut);
-  * discounting (Josang): r's evidence is scaled by a's belief mass in r,
-    b_ar = alpha/(alpha + beta + 2) of r's weakest dimension;
-  * deviation test (Buchegger & Le Boudec): once a holds ``testimony_min_evidence`` about
-    b, a testimony whose expected value differs from a's own by more than
-    ``testimony_deviation`` is rejected and counted (once per testimony and peer, however
-    often it is fused again before the reporter's next one: ``testimonies_rejected``);
-  * averaging, not adding: the accepted testimonies are averaged (dependent sources), and
-    only their surplus over a's own amount of evidence is added to it -- a testimony
-    speaks only for what a could not see itself (a partition, a late join);
-  * a testimony can make a more careful, never less: per dimension the fused opinion is
-    used only where its expected value is below a's own. Praise cannot clear anyone, so a
-    colluding pair cannot vouch each other back into trust; slander is bounded by the
-    rules above.
-
-Overall trust in a peer is its weakest dimension, tau = min_d tau_d.
-
-The transparency trust widens the safety distance (paper Sec. III.D, IV.C):
-
-    eps_ab = eps_0 * g(tau_t),   g(tau) = 1 + (g_max - 1) * clip((tau_full - tau) / (tau_full - tau_floor), 0, 1)
-
-so g(1) = 1, g is non-increasing and bounded by g_max. tau_t here is not the mean of the
-transparency belief but its ``epsilon_quantile`` lower quantile (the q-quantile of
-Beta(alpha + 1, beta + 1)): a peer we have little evidence about -- new, silent,
-partitioned -- is planned around as its worst plausible case, a peer with a long record
-of truth at eps_0, and a known liar at the widest epsilon whatever its luck lately.
+with q a lower quantile of the transparency belief, not its mean, so a peer we know
+little about is planned around as its worst plausible case. docs/design/trust.md,
+"Beliefs", "Testimonies" and "From trust to distance".
 """
 
 from __future__ import annotations
@@ -169,7 +134,8 @@ class TrustBook:
         self._fused.clear()
 
     def fused(self, peer: int, now: float) -> tuple[np.ndarray, np.ndarray]:
-        """Own evidence, made more careful where testimonies say so (module docstring)."""
+        """Own evidence, made more careful where testimonies say so (docs/design/trust.md,
+        "Testimonies")."""
         key = (peer, now)
         if key not in self._fused:
             if len(self._fused) > 256:  # bounded, also when no evidence comes for hours
