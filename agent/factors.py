@@ -1,33 +1,17 @@
 """Error functions of our own factors, with analytic Jacobians.
 
-Each function is pure: it maps the four states of one interval of the trajectory,
-(p_i, v_i, p_{i+1}, v_{i+1}), to a residual vector and d(residual)/d(state) blocks. The
-planner wraps them in GTSAM CustomFactors (agent.planner); tests check every Jacobian
-against central differences.
+Each function is pure: it maps the four states of one interval, (p_i, v_i, p_{i+1},
+v_{i+1}), to residual rows and d(row)/d(state) blocks, which the planner wraps in GTSAM
+CustomFactors (agent.planner); tests check every Jacobian against central differences.
+Per check time tau_k = t_i + u_k*dt (u_0 = 0: the support state; the rest agent.gp's):
 
-Residual rows of one interval, for the check times tau_k = t_i + u_k*dt (u_0 = 0 is the
-support state itself, the rest are GP-interpolated, agent.gp):
+  obstacle     eqs. (4)-(6)  max(0, eps_obs - d(p(tau_k)))                1 row
+  proximity    eqs. (7)-(9)  max(0, eps_ab - |p(tau_k) - p_b(tau_k)|)     1 row per peer b
+  speed                      max(0, |v(tau_k)| - v_max)                   1 row
+  lane                       p(tau_k) - q(p(tau_k)), q on the route       2 rows
+  consistency  Sec. III.D    max(0, |a_i|_delta - abar_i), per interval   1 row
 
-for each check k:
-  obstacle   (eqs. (4)-(6))  c_obs = max(0, eps_obs - d(p(tau_k)))              1 row
-  proximity  (eqs. (7)-(9))  c_t   = max(0, eps_ab - ||p(tau_k) - p_b(tau_k)||)  M rows
-             against each peer b's shared plan p_b, a constant here, evaluated at the
-             same absolute time (so plans with different t0/dt compare correctly)
-  speed                      max(0, ||v(tau_k)|| - v_max)                         1 row
-  lane                       p(tau_k) - q(p(tau_k)), q the nearest point of the    2 rows
-                             car's route polyline (its lane centre line); a soft
-                             pull, so a car leaves its lane only to avoid someone
-then once per interval:
-  consistency (Sec. III.D)   max(0, |a_i|_delta - abar_i)                          1 row
-             where a_i = (v_{i+1} - v_i)/dt is the interval's mean acceleration
-             (exact for the WNOA mean, whose acceleration is linear in time),
-             |a|_delta = sqrt(|a|^2 + delta^2) - delta a smooth magnitude, and abar_i
-             the peers' mean acceleration magnitude over the same interval. The hinge
-             is one-sided: a car is pulled down to the fleet's acceleration, never
-             pushed to accelerate more than it needs (a two-sided pull makes cars copy
-             each other's manoeuvres and the fleet oscillates).
-
-A hinge is flat (zero residual, zero Jacobian) when inactive.
+Inactive hinges are flat (zero residual and Jacobian). docs/design/planner.md, "The factors".
 """
 
 from __future__ import annotations

@@ -2,20 +2,16 @@
 
 A plan is N support states x_i = (p_i, v_i) at absolute times t_i = t0 + i*dt. Under the
 WNOA prior (paper eq. (3); Barfoot, *State Estimation for Robotics*, ch. 11) each axis is
-an independent double integrator driven by white noise of power spectral density Qc:
-
-    Phi(s) = [[1, s], [0, 1]]                          transition over time s
-    Q(s)   = Qc [[s^3/3, s^2/2], [s^2/2, s]]           process covariance over time s
-
+a double integrator, Phi(s) = [[1, s], [0, 1]], Q(s) = Qc [[s^3/3, s^2/2], [s^2/2, s]],
 and the posterior mean between two support states at t_i < tau < t_{i+1} is
 
     x(tau) = Lambda(tau) x_i + Psi(tau) x_{i+1}
     Psi(tau)    = Q(tau - t_i) Phi(t_{i+1} - tau)^T Q(dt)^-1
     Lambda(tau) = Phi(tau - t_i) - Psi(tau) Phi(dt)
 
-Qc cancels, so Lambda and Psi are 2x2 per axis and shared by both axes (the position row
-is the cubic Hermite spline through the two states). GTSAM's WnoaInterpFactorPoint2 uses
-the same matrices; tests/agent/test_gp.py checks that they agree.
+Qc cancels: the position row is the cubic Hermite spline through the two states.
+GTSAM's WnoaInterpFactorPoint2 uses the same matrices (tests/agent/test_gp.py).
+docs/design/planner.md, "Checks between support states".
 """
 
 from __future__ import annotations

@@ -2,30 +2,16 @@
 
 Two constructions of the same residuals (``PlannerConfig.interpolation``):
 
-* ``batched`` (default): the intervals i = 0..N-2 are cut into chunks of
-  ``PlannerConfig.intervals_per_factor`` consecutive intervals; each chunk is one
-  CustomFactor on the support states it spans, (p_s, v_s) for s = first..last+1, whose
-  residual is its intervals' rows (agent.factors) stacked. All chunks are evaluated
-  together in one compiled call (agent.interval_kernel; a :class:`BatchedIntervals`
-  cache shared by the chunk factors); each factor returns its own slice.
-
-  Why chunks: GTSAM calls a CustomFactor from C++ into Python once per linearisation and
-  once per error evaluation, and each call, with the conversion of its Jacobian blocks to
-  Eigen, costs a few microseconds -- more than the arithmetic. Fewer, larger factors make
-  fewer calls; the price is that GTSAM treats a chunk's Jacobian as dense over its keys
-  (the zeros of the intervals a key is not part of are multiplied too), so a chunk of c
-  intervals costs the linear solver about c times the work of c separate ones. A few
-  intervals per chunk is the sweet spot (benchmarks/bench_planner.py measures it).
-
-  The cache is keyed by the whole Values: a factor is served from it only when the Values
-  it is called with equals (exactly, ``Values.equals`` with tolerance 0) the one the cache
-  was computed from; otherwise everything is evaluated anew. A chunk's residual depends
-  only on its own states, so each factor is still a pure function of its keys: the cache
-  saves Python calls, not correctness. Residual and Jacobian are computed together: LM
-  linearises at every point whose error it accepted, so one evaluation per point serves
-  both.
+* ``batched`` (default): the intervals are cut into chunks of
+  ``PlannerConfig.intervals_per_factor``; each chunk is one CustomFactor on the support
+  states it spans, whose residual is its intervals' rows (agent.factors) stacked. All
+  chunks are evaluated together in one compiled call (agent.interval_kernel), cached in a
+  :class:`BatchedIntervals` keyed by the whole Values, and each factor returns its slice:
+  fewer calls from C++ into Python, each factor still a pure function of its keys.
 * ``gtsam``: GTSAM's own ``WnoaInterpFactorPoint2`` wraps a per-check CustomFactor on an
-  interpolated state; slower (one Python call per check), kept as the reference.
+  interpolated state; one Python call per check, kept as the reference.
+
+docs/design/planner.md, "Checks between support states".
 """
 
 from __future__ import annotations

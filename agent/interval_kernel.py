@@ -3,19 +3,14 @@
 ``evaluate`` computes, for the selected intervals i of a trajectory, the residual rows of
 agent.factors (per check k: obstacle, one per peer, speed, lane x/y; then consistency) and
 their Jacobian blocks d(row)/d(p_i, v_i, p_i+1, v_i+1). The numpy form of the same checks
-(agent.factors.check_residuals) evaluates a few hundred points per call with some eighty
-numpy calls, whose overhead outweighs the arithmetic: this loop does the rest of the work
-in about a tenth of the time (benchmarks/bench_planner.py).
+(agent.factors.check_residuals) spends more on its many calls than on the arithmetic.
+The numbers are the numpy form's, bit for bit: the checks' points come from numpy's
+matmul, and every product and sum below is the numpy form's, in its order, computed
+whether its hinge is active or not (tests/agent/test_interval_kernel.py).
 
-The same numbers, bit for bit: the checks' points come from numpy's matmul as before,
-and every product and sum below is the numpy form's, in its order, computed whether its
-hinge is active or not (an inactive one multiplies by 0.0, signed zeros and all). So a
-plan, and a run of the in-process fleet, is what it was to the last bit
-(tests/agent/test_interval_kernel.py; the bank's journal entries rerun identical).
-
-Compiled on first use and cached on disk beside this file (numba's ``cache=True``): a
-process that finds the cache loads it in a fraction of a second; ``warm()`` compiles it
-ahead, so that many processes started at once (``trustfg sim``) do not all compile it.
+Compiled on first use and cached on disk beside this file (numba's ``cache=True``);
+``warm()`` compiles it ahead, so that many processes started at once (``trustfg sim``)
+do not all compile it.
 """
 
 from __future__ import annotations
@@ -29,8 +24,8 @@ import numpy as np
 @numba.njit(cache=True, nogil=True)
 def _evaluate(p, v, intervals, weights, peer_positions, epsilons, sdf_values, origin_x, origin_y, cell,
               eps_obs, max_speed, lane, targets, delta, delta2, dt, support, jacobians, residual, blocks):
-    """p, v (I, K, 2): the GP-interpolated checks of the selected intervals (numpy's matmul,
-    as before). Every product below is the numpy form's, in its order, active or not (a
+    """p, v (I, K, 2): the GP-interpolated checks of the selected intervals (numpy's
+    matmul). Every product below is the numpy form's, in its order, active or not (a
     hinge off multiplies by 0.0): the same numbers, bit for bit, signed zeros too."""
     n_checks, n_peers, n_segments = weights.shape[0], epsilons.shape[0], lane.shape[0]
     per_check = n_peers + 2 + (2 if n_segments > 0 else 0)

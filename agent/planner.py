@@ -6,21 +6,12 @@ at absolute times t_i = t0 + i*dt:
   start prior    PriorFactorPoint2(p_0), PriorFactorVector(v_0)   current pose and velocity
   goal prior     PriorFactorPoint2(p_N-1) = goal, PriorFactorVector(v_N-1) = 0
   GP prior       WnoaMotionFactorPoint2(x_i, x_i+1)                eq. (3), smoothness
-  checks         obstacle hinge (eq. (6)), proximity hinge to every peer (eq. (9)),
-                 soft speed limit and consistency (agent.factors)
+  checks         obstacle hinge (eq. (6)), proximity hinge to every peer (eq. (9)), soft
+                 speed limit, lane and consistency (agent.factors), at each support state
+                 and between them (agent.interval_factors)
 
-The checks run at each support state and at ``interp_checks`` GP-interpolated times per
-interval, so a thin obstacle or a crossing peer cannot slip between two states; they
-become GTSAM factors in agent.interval_factors (chunks of intervals sharing one
-vectorised evaluation, or GTSAM's own interpolation factor as the reference).
-
-Peers that cannot come within reach during the horizon -- the two cars are further
-apart than both could close at the planning speed limit, plus their epsilon and a margin
-(:func:`peers_within_reach`) -- are left out of the graph: their rows would be zero for
-any plan the car can drive, and they would cost rows in every check.
-
-Replanning is warm-started from the previous plan resampled on the new time grid
-(receding horizon), so a replan takes a few LM iterations.
+Peers out of reach are left out (:func:`peers_within_reach`); a replan is warm-started
+from the previous plan. docs/design/planner.md.
 """
 
 from __future__ import annotations

@@ -1,25 +1,14 @@
 """Routes: a car's via points round the obstacles of a map (and round cars that stand).
 
 A scene's route is its lane: the planner seeds its first plan along it and is pulled
-softly towards it (planner.lane_keeping), and the ORCA baseline steers at its next via
-point. Cars whose straight line from start to goal keeps ``comfort`` from every obstacle
-get no via points. Otherwise the route is the cheapest path on an 8-connected grid over
-the free space (the cells whose signed distance is at least ``clearance``), where a step
-costs its length times
-
-    1 + NEAR_WEIGHT * clip((comfort - d) / comfort, 0, 1),      d the step's distance to obstacles
-
-(so routes keep to the middle of a passage where they can), found by scipy's Dijkstra,
-then shortened: from each kept point, the farthest later grid point whose straight segment
-keeps ``comfort`` (or what its two ends have, if less) is the next via point.
-
-A replan uses the same search to get round cars that stand (agent.safe_plan, ``around``):
-each is a disc of keep-out (centre c, radius r) that counts as an obstacle whose surface
-lies ``clearance`` inside the disc's rim, so the distance searched on is
-
-    d'(z) = min(d(z), min_k |z - c_k| - r_k + clearance)
-
-and keeping ``clearance`` in d' keeps r_k from every c_k.
+softly towards it, and the ORCA baseline steers at its next via point. A car whose
+straight line keeps ``comfort`` from every obstacle gets none; otherwise the route is
+the cheapest path on an 8-connected grid over the free space, a step costing its length
+times 1 + NEAR_WEIGHT * clip((comfort - d) / comfort, 0, 1) (routes keep to the middle
+of a passage), found by Dijkstra and shortened to the farthest clear via points. Cars
+that stand are discs of keep-out searched round the same way (agent.safe_plan,
+``around``); :func:`connected` tells whether a way exists at all.
+docs/design/planner.md, "Routes".
 """
 
 from __future__ import annotations
