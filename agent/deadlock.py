@@ -1,77 +1,15 @@
 """Deadlocks: detected from what a car sees, resolved by a priority rule (decentralised).
 
-Verified plans and the fallback make a car stop rather than risk a breach; cars that stop
-for one another can stop for good -- two in a corridor nose to nose, a ring of cars round
-a pillar, each waiting for the next. Each car watches for it on its own, from the poses
-it observes and the plans it hears, at every replan:
+Cars that stop for one another can stop for good. Each car watches for it on its own at
+every replan, from the poses it observes and the plans it hears: it is deadlocked when
+it and every car of its group (peers near it or in its way, not parked, waiting or
+stuck) are stalled -- less than ``progress_m`` nearer their goals over ``window_s``. The
+car of the group that has been through the most deadlocks, then the lowest id, goes on;
+every other drives to a detour for ``yield_s``. A car parked at its goal that alone walls
+a stuck peer in steps aside (:meth:`DeadlockWatch.step_aside`) until the peer has a way.
 
-    stalled     a car that has come less than ``progress_m`` nearer its goal over the
-                last ``window_s`` (judged on positions sampled at the replans; for a peer
-                whose goal we have not heard, one that has moved less than that): a car
-                that stands, and one that wanders about without getting anywhere
-    group       the peers within ``group_radius_m`` and those our last plans failed
-                verification against (in our way, on our goal say, however far), but
-                for those at their goals (as their plan messages name them), waiting
-                for their departure, or stuck (their plan messages say they are told to
-                drive and do not move: a car with its command link cut goes first for
-                ever, and the car that gives way to it gives way for good -- link-cut,
-                car 2 cut at the entry of the intersection: car 3 gave way 4 times in
-                30 s; a stuck car is a standing obstacle, to be planned round)
-    deadlock    we are stalled (departed, not at our goal, not giving way already), the
-                group is not empty and every car in it is stalled too: were one of them
-                getting somewhere, we would be waiting for it, not deadlocked
-
-Resolution, a yielding rule by priority: in the group, the car that has been through
-the most deadlocks this trial (``been_through``, as its plan messages tell it), and of
-those the lowest id, keeps going for its goal; every other member gives way -- for
-``yield_s`` it plans to a detour goal ``detour_m`` away, in the free direction (walls,
-the other cars as seen and every goal heard: a car that gives way onto another's goal
-walls that one out) most directly away from the ways of the members that go before it
-(the nearest point of their plans and goals), turned in steps of DETOUR_TURNS_DEG, then
-heads for its goal again. Each car applies the same rule to nearly the same
-observations, so the group agrees on who goes first with nothing but its plans; the one
-that goes first finds room as the others make it, and once it has left, the next in
-line goes first. Each detection counts one deadlock (``deadlocks``), each detour one
-yield (``deadlock_yields``).
-
-The order ages. By id alone a car in the middle of a crowd gives way at every deadlock
-it meets (circle-16 seeds 0 and 49: cars that gave way 2-5 times were still out at the
-timeout); a car that has been through more deadlocks goes first. A deadlock counts
-once it is over -- for the car that gave way when its detour is driven, for the one that
-went first when its group moves again -- so that the count does not change while the
-group decides: counted as it was decided (tried: a car's yields, counted as it gave
-way), the car that decided first told a higher count and the others gave way to it as
-well, and on its return the car that had gone first lost its turn to it (bottleneck-4
-seeds 0-7: 37 yields against 24, one run 38 % slower); counted over, for both roles,
-the car that went first keeps its turn. A car that claims
-deadlocks it never met takes the right of way, which costs the others time, not safety
-(every plan is verified whoever goes first).
-
-A car parked at its goal is no member of any group, and it can wall a car in for good: a
-car that gave way into the corner beside a door, and a peer parks at its goal between
-that corner and the door (bottleneck-4: 13 of 50 bank runs, every one this way). So a
-parked car steps aside (``step_aside``) when a peer that is stuck -- stalled, or
-halting: every plan it sent over the window ends at a standstill short of its goal, as
-a car creeping on its fallback's brake does (bottleneck-4 seed 4: 2.5 cm/s, more
-progress than ``progress_m``, and every plan refused) -- not at its goal, has no way to
-its goal -- no connected free space keeping the wall's epsilon from walls and eps_0
-from every car that stands (parked, waiting to depart, stuck, or stuck as the window
-saw it) -- while it would have one were we not where we stand; or it stands inside our
-keep-out (eps_0 from us) and would have a way without us: a car pressed into the pinch
-between a wall and us counts as in the region of its nearest free cell, which may lie on
-the pinch's far side (a held-out field, random-field-6-s93374344 seed 3: a car stood 48 s
-0.43 m from one parked at its goal, counted as having a way). A car
-that stands but is not parked counts as a wall too: a road's dead end, a car parked
-across the road's one lane and a car stuck in the other -- two cars wall the third
-in, and neither the yielding rule (the stuck one has nowhere to give way to) nor a rule
-that counted parked cars alone would open it (a held-out T-junction, seed 8). It
-drives ``detour_m`` to the first side (straight away from the walled-in car, then
-turning by DETOUR_TURNS_DEG) from where the way is open, holds there until the peer is
-at its goal or has a way round our goal (the cars that stood, where they are now), at
-least ``yield_s`` and at most ASIDE_MAX_YIELDS of those, and drives back. Each counts
-one step aside (``deadlock_steps_aside``).
-
-Pure: the caller passes the time and what its car sees.
+Pure: the caller passes the time and what its car sees. docs/design/safety.md,
+"Deadlocks".
 """
 
 from __future__ import annotations
@@ -192,7 +130,7 @@ class DeadlockWatch:
     def step_aside(self, now: float, position: np.ndarray, goal: np.ndarray, peers: dict[int, PeerSeen],
                    keep_clear: float, sdf: SignedDistanceField, wall_clear: float) -> np.ndarray | None:
         """For a car parked at its goal: record what we see; where to step aside to when we
-        wall in a stalled peer (module docstring), else None."""
+        wall in a stalled peer (docs/design/safety.md, "Deadlocks"), else None."""
         if self.detour is not None and self.detour.for_peer is not None and now < self.detour.until:
             return self.detour.goal
         self._record(now, position, goal, peers)
@@ -318,9 +256,8 @@ def goes_first(been_through: int, car_id: int, other_been_through: int, other_id
 
 def _everyone(peers: dict[int, PeerSeen]) -> list[np.ndarray]:
     """What a detour keeps clear of besides the ways: every car seen, and every peer's
-    goal we know -- a car that gives way onto another's goal walls that one out of it
-    (t-junction-6 seed 49: two cars each gave way onto the other's goal and stood there
-    for good)."""
+    goal we know -- a car that gives way onto another's goal walls that one out of it (two
+    cars that each gave way onto the other's goal would stand there for good)."""
     return [p.position for p in peers.values()] + [p.goal for p in peers.values() if p.goal is not None]
 
 

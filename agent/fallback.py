@@ -3,23 +3,14 @@
 When no new plan verifies within a replan's budget (agent.safe_plan), the car commits
 to a trajectory along the path of its last verified plan -- a path it knows clear of the
 walls -- that brakes to a stop short of everything it knows of, and publishes it as its
-plan (its peers then plan around a car that is stopping).
-
-The timing along that path is the verified plan's own while the car is on it (within
-``ON_PLAN_M`` and ``ON_PLAN_MPS`` of where the plan says it is now); else (the car has
-fallen behind it, having braked before) its present speed along the path, for at most
-``CRUISE_MAX_S``. From that timing, :func:`brake_after` makes the trajectory that
-follows it until a time t_b and then brakes at ``VerifyConfig.fallback_decel_mps2``
-along the rest of the path:
+plan (its peers then plan around a car that is stopping). It follows the plan's timing
+(or the car's present speed along its path) until t_b, then brakes at
+``VerifyConfig.fallback_decel_mps2``:
 
     s(tau) = s_b + v_b (tau - t_b) - a (tau - t_b)^2 / 2,     t_b <= tau <= t_b + v_b / a
 
-The fallback takes the latest t_b whose trajectory verifies against the peers' present
-plans: first the timing itself (a verified plan still clear is simply kept), then t_b
-at fractions of the way to its first conflict, down to braking at once -- so it goes as
-far as it safely can and stops short of the first conflict it knows of. When even
-braking at once does not verify (a peer's plan runs into where we must stop), it brakes
-at once anyway: the shortest stop there is.
+with the latest t_b that still verifies, down to braking at once.
+docs/design/safety.md, "Verified plans".
 """
 
 from __future__ import annotations
@@ -63,7 +54,7 @@ def fallback(reference: Plan | None, request: PlanRequest, bounds: Bounds, sdf: 
     verdict = verify(timing, request.peers, bounds, sdf, config, t_from=t_now)
     # Kept only if it comes to rest itself: its last support state, not state_at(t_end),
     # which reads zero at the end of every plan -- a cruise at the present speed read as
-    # stopping was kept at every replan, and a car crept on for good (bottleneck-4 seed 4).
+    # stopping would be kept at every replan, and the car would creep on for good.
     if verdict.ok and float(np.linalg.norm(timing.velocities[-1])) < MOVING_MPS:
         return timing, verdict  # the verified plan is still clear: keep it
     first = min((c.t for c in verdict.conflicts), default=timing.t_end)

@@ -7,10 +7,10 @@ u <= v_max and |du/dt| <= a_max:
     u_0 = min(s_0 or the start speed, v_max)
     u_k = min(v_max, u_{k-1} + clip(s_k - u_{k-1}, -a_max dt, a_max dt))
 
-A recurrence, so no numpy form: in Python it cost 50-500 us a plan (60-600 check times),
-several plans a replan. Compiled (numba), with Python's own ``min``/``max`` (the first
-argument unless the second is strictly smaller / larger), so the numbers are the same as
-the Python loop's to the last bit, NaN included (tests/agent/test_verify.py).
+A recurrence over hundreds of check times, several plans a replan, so no numpy form:
+compiled (numba), with Python's own ``min``/``max`` (the first argument unless the
+second is strictly smaller / larger), so the numbers are the Python loop's to the last
+bit, NaN included (tests/agent/test_verify.py).
 """
 
 from __future__ import annotations

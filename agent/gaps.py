@@ -8,14 +8,10 @@ the steps to its neighbours:
 
     gap_k = |r_k| - 0.5 max(|r_k - r_k-1|, |r_k+1 - r_k|)      (end samples: their one step)
 
-For the walls the slack is half the plan's own larger step (:func:`half_steps`).
-
-In numpy this was some ten calls per peer on arrays of a few hundred samples; a plan's
-check cost about 0.1 ms per peer (0.9 ms at 7 peers, 41 states), and verification was a
-fifth of a car's replanning CPU at 7 peers. The loop here takes the peer's positions
-from agent.interpolate's (Plan.state_at's numbers) and does every operation as numpy did,
-in its order (|r| = sqrt(x*x + y*y), no fused multiply-add; maximum NaN if either is), so
-the numbers are the same to the last bit (tests/agent/test_gaps.py).
+For the walls the slack is half the plan's own larger step (:func:`half_steps`). Every
+operation is the numpy form's, in its order (|r| = sqrt(x*x + y*y), no fused
+multiply-add; maximum NaN if either is), so the numbers are numpy's to the last bit
+(tests/agent/test_gaps.py); compiled, because numpy's many small calls cost more.
 """
 
 from __future__ import annotations

@@ -1,43 +1,16 @@
 """The proximity guard: a speed cap from the poses the car sees and the map, under any plan.
 
-The planner keeps cars apart with soft factors against the plans peers share; when those
-plans are late or missing (heavy loss, a partition) a car plans against guesses. The
-guard is the hard rule underneath: a car never drives faster than it can stop before
-another car seen ahead of it. For every other car j whose centre lies within
-``cone_deg`` of our heading, at distance d,
+A car never drives faster than it can stop short of another car seen within
+``cone_deg`` of its heading, at distance d, or of a wall ahead:
 
     v t_r + v^2 / (2 a) <= d - d_stop     (reaction distance + braking distance)
     =>  v_max = a (-t_r + sqrt(t_r^2 + 2 (d - d_stop) / a)),   0 once d <= d_stop
 
-with a = ``decel_mps2``, t_r = ``reaction_s`` and d_stop the pair's breach distance
-(SafetyConfig: both radii + the required clearance) + ``stop_margin_m``. When we are
-also ahead of j (head-on), both cars close the same gap, so each may use only half of
-it: d - d_stop becomes (d - d_stop) / 2. A car beside us (outside the cone, but not
-behind: a = its distance along our heading > 0) is closed in on at v a / d, and that
-part of our speed must stop in time: v_max = v_stop(d - d_stop) d / a. That car may be
-one that cannot brake for us (stopped, its link cut): without this rule a car curving
-round it closes the gap while it stays beside (tests/agent/test_guard.py, the spiral:
-down to 0.16 m centre to centre, a breach below 0.3 m, against 0.32 m with it). Cars
-behind never limit us, and turning is never limited, so a car held by the guard can
-still turn away.
-
-The truster runs the same rule on the poses it sees (agent.car_agent): a peer its guard
-holds below its plan's speed is not taken for one that does not do what it said.
-
-The reaction time t_r is measured, not assumed, where it can be (the car process):
-the age of the pose the command is computed from plus how long the command may stay in
-force -- the longest gap between the control loop's recent ticks, at most
-``command_hold_max_s`` (the car's watchdog stops it by then) -- and never less than
-``reaction_s``. A process starved of CPU (eight car processes on two cores: ticks 80-130 ms
-late, stalls over a second) thus drives slower near others instead of trusting 0.1 s.
-And a car that turns is checked over the headings it sweeps until the next command takes
-effect, from yaw to yaw + omega t_r every TURN_STEP_RAD: turning brings a car beside us
-into the cone.
-
-Walls the same way: d - d_stop is replaced by how far the centre can go straight ahead
-(ray-marched on the signed distance field, 2 cm steps) before its edge comes closer than
-``wall_clearance_m`` to a wall -- or closer than it already is, so a car already near a
-wall may drive along it or away from it, never into it.
+with a = ``decel_mps2``, t_r the reaction time (:func:`reaction_time`) and d_stop the
+pair's breach distance (SafetyConfig) + ``stop_margin_m``. Head on, each car may use
+half the gap; a car beside caps the part of the speed that closes in on it; for a wall,
+d - d_stop is the room straight ahead (ray-marched). Turning is never limited.
+docs/design/safety.md, "The proximity guard".
 """
 
 from __future__ import annotations
@@ -90,7 +63,7 @@ def capped_below(x: float, y: float, yaw: float, radius_m: float,
     answer at less cost: the cap is a minimum of terms >= 0, so a speed <= 0 is never
     above it, and the walls' ray march (the dearest term) is left out when a car ahead
     already holds the speed down. For a truster asking of every peer ten times a second
-    whether its guard holds it (agent.car_agent)."""
+    whether its guard holds it (agent.consistency)."""
     if not speed > 0.0:
         return False
     t_r = config.reaction_s

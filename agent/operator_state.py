@@ -1,17 +1,9 @@
 """How the operator runs a car: trials, the emergency stop and the deadman (pure logic).
 
-The car process (trustfg.fleet.car.process) owns one :class:`Operation` and hands it what
-the operator says (start, stop and heartbeat messages), what the car itself reports (its
-e-stop latched, from the car link's answers) and the passing time; it asks it, on every
-control tick, whether the car may drive and which flags its next datagram carries. No
-sockets, threads or clocks in here: every time is passed in (seconds, the fleet clock).
-
-Modes::
-
-    waiting    holds still (STOP); takes a start that names it
-    driving    a trial: holds until its departure time, then drives its plan
-    arrived    the trial ended at its goal: holds, takes the next start
-    e_stopped  latched: E_STOP in every datagram until the operator releases it
+The car process (fleet.car.process) owns one :class:`Operation` and hands it what the
+operator says (start, stop, heartbeat), what the car reports (its e-stop latched) and the
+time (seconds, the fleet clock); on every control tick it asks whether the car may drive
+and which flags its next datagram carries. Modes::
 
     waiting / arrived --start(trial T)--> driving       (see take_start for the rules)
     driving --at its goal--> arrived
@@ -19,25 +11,7 @@ Modes::
     driving --abort (trial T or any) | deadman | release--> waiting
     any --estop--> e_stopped --release--> waiting
 
-Rules that keep a car from driving off by itself:
-
-* A start names a trial. A car takes each trial's start once; it takes none while it
-  drives, is e-stopped, or (deadman on) does not hear the operator's heartbeat (such a
-  start is tried again at the next heartbeat); and it
-  takes none whose departure has already passed when it arrives -- so a car process
-  restarted by its supervisor, which gets the operator's cached start of the running
-  trial, waits for the operator to start it again, unless ``operator.rejoin_trial``.
-* An e-stop aborts the trial; a release never resumes one (the car waits for a new start).
-* Deadman (``operator.deadman_s`` > 0): a driving car whose operator has not been heard
-  for longer than that ends its trial and waits.
-* After a release the car's datagrams carry RELEASE for ``operator.release_s`` while it
-  waits (the car's latch needs an in-sequence RELEASE: bridge.carlink.receiver, rule 7;
-  and an operator's e-stop repeats, still in flight, must not latch it again). Never
-  while it drives: a start ends the RELEASEs, so an e-stop sent straight to the car
-  during a trial always holds.
-  A car that reports its latch on (an e-stop the operator sent straight to it, or one
-  from before this process started) makes the car e-stopped here too, so the process
-  says so and waits for the release.
+A car never drives off by itself: docs/design/safety.md, "The car's side of the protocol".
 """
 
 from __future__ import annotations
@@ -70,7 +44,8 @@ class LinkFlags:
 
 
 class Operation:
-    """One car's side of the operator's protocol; see the module docstring."""
+    """One car's side of the operator's protocol: its modes (module docstring) and rules
+    (docs/design/safety.md, "The car's side of the protocol")."""
 
     def __init__(self, car_id: int, config: OperatorConfig):
         self.car_id = car_id

@@ -1,26 +1,16 @@
 """A plan's path at a pace the car can drive (path-velocity decomposition).
 
-The optimiser's start prior on velocity is soft: from a standstill, where the goal is far
-and the arrival time near (after a car gave way, say), it returns plans that set off
-faster than the car can accelerate, and the check of the vehicle's limits (agent.verify)
-refuses them by a centimetre or two of lag. Every fresh start does the same, so the car
-stood on its fallback for good (bottleneck-4 seeds 28 and 37: 120-130 fallbacks in a row
-from cars that had given way, every plan refused on its limits alone, the path itself
-clear).
+From a standstill the optimiser's soft start prior returns plans that set off faster
+than the car can accelerate, and the check of the vehicle's limits (agent.verify)
+refuses them. :func:`retime` keeps the path and changes only when the car is where: the
+speed along the finely sampled path is bounded by the plan's own, the car's top speed
+and a share ``ACCEL_SHARE`` of its acceleration from the speed it has (a forward pass)
+and down to the plan's speed at its end (a backward pass),
 
-:func:`retime` keeps the path and changes only when the car is where. Sampled finely
-(arc length s), the speed along the path is bounded by the plan's own speed, the car's
-top speed and what a share ``ACCEL_SHARE`` of its acceleration allows from the speed it
-has now (a forward pass) and down to the plan's speed at its end (a backward pass):
+    u_{k+1} <= sqrt(u_k^2 + 2 a ds_k)  (forward),   u_k <= sqrt(u_{k+1}^2 + 2 a ds_k)  (backward)
 
-    u(s) = min(|v_plan(s)|, v_max)
-    u_{k+1} <= sqrt(u_k^2 + 2 a ds_k)        (forward, u_0 = the car's speed)
-    u_k     <= sqrt(u_{k+1}^2 + 2 a ds_k)    (backward)
-
-Each step then takes dt_k = max(2 ds_k / (u_k + u_{k+1}), the plan's own dt_k): never
-sooner than the plan (its waits are kept, and slower is all the limits ask). The new
-plan has the old one's support times; it covers a prefix of the path. It is a guess like
-any other: safe_plan verifies it against the walls and every peer at its new times.
+and no step is taken sooner than the plan takes it. The result is a guess like any other:
+agent.safe_plan verifies it. docs/design/safety.md, "Verified plans".
 """
 
 from __future__ import annotations

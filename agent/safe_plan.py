@@ -2,61 +2,16 @@
 
 Every plan the optimiser returns is verified (agent.verify) before the car uses or
 publishes it. A plan that fails is not executed; the planner tries again from other
-starting guesses, cheapest first, until one verifies, ``VerifyConfig.max_attempts``
-plans have been tried, or (in the car process) ``budget_ms`` of CPU time or
-``wall_limit_s`` of wall time has gone:
+starting guesses, cheapest first -- ``tighten``, ``around``, ``other side``, ``retimed``,
+``slower``, ``off lane``, ``cold`` (:func:`_next_attempt` picks the order from what the
+plan broke) -- until one verifies, ``VerifyConfig.max_attempts`` plans have been tried,
+or (in the car process) ``budget_ms`` of CPU time or ``wall_limit_s`` of wall time has
+gone. When nothing verifies, the car commits to the fallback (agent.fallback). Counting
+the outcomes per car is the caller's job (agent.car_agent).
 
-    tighten     the failed plan as the warm start, with every epsilon it broke raised by
-                how far it broke it: a hinge that presses settles inside its epsilon
-                (a soft factor's equilibrium), so asking for a little more lands the plan
-                where the check wants it. Cheap: a few LM iterations.
-    other side  the failed plan pushed, around the time of its first conflict, to the
-                other side of the peer it conflicts with (a smooth bump, mirrored through
-                the peer's position), or out of the wall it cuts: LM from there finds the
-                pass the warm start could not reach (a warm-started plan never flips sides
-                on its own, and a route through the middle of a pillar feels no push to
-                either side).
-    around      when a peer the plan conflicts with stands (its plan moves it less than
-                STANDING_M: parked at its goal, waiting, stopped), cold along a grid route
-                (agent.routes) that keeps every standing peer's epsilon + AROUND_MARGIN_M
-                and the wall's epsilon: warm starts and lane keeping pull a plan through
-                a car that parked on its lane, and no bump finds the way round a car
-                parked beside a doorway (a bank run had a car that gave way stand 20 s
-                0.6 m from a parked car, every replan failing against it). The arrival
-                slips by the route's extra length.
-    retimed     the failed plan's path at a pace the car can drive from the speed it has
-                (agent.retime): no optimisation, for a plan that broke only the vehicle's
-                limits -- from a standstill the soft start prior lets every plan set off
-                faster than the car accelerates, and a car that had given way stood on
-                its fallback for good (bottleneck-4 seeds 28, 37).
-    slower      a later arrival (the horizon half as long again), cold: the car lets the
-                others through first; with the lingering paces of the cold start this
-                includes waiting in place.
-    off lane    cold, without lane keeping: from a car standing off its lane (after a
-                detour or a swerve) the lane pulls the plan sideways harder than the car
-                can accelerate, at any pace (a process-fleet run had a car stand 0.4 m
-                off its lane for 45 s, every replan a fallback).
-    cold        the planner's cold start (the route at several paces, the cheapest first).
-
-A plan that breaks only the vehicle's limits tries ``retimed``, ``slower``, then ``off lane``, first;
-``around`` is tried only where it applies (else the next one is).
-
-When nothing verifies, the car commits to the fallback (agent.fallback): a braking
-trajectory along its last verified plan that stops short of everything it knows of (or
-that plan itself while it is still clear), published as its plan so that its peers plan
-around a car that stops. Counting the outcomes (first try, retry, fallback) per car is
-the caller's job (agent.car_agent).
-
-Pure: the budget's clock is passed in (None in the in-process fleet, which runs on simulated
-time and counts attempts only, so a run stays exactly repeatable from its seed).
-
-The budget is CPU time, so that a process waiting for a core is not cut short for the
-wait; the wall-time limit stops retries that would outlast what the car process can wait
-between two renewals of its command loop's permit (the car process passes half the
-lease). Eight car processes planning cold on two cores took up to 1.7 s of wall time for
-one replan, within its CPU budget, and outlasted the 1 s lease (the command loop stopped
-the car until the next permit; circle-obstacles-8, seed 1); with the limit, the longest
-took 860 ms in the same 15 runs.
+Pure: the budget's clock is passed in (None in the in-process fleet, which counts
+attempts only, so a run stays exactly repeatable from its seed). docs/design/safety.md,
+"Verified plans".
 """
 
 from __future__ import annotations

@@ -1,54 +1,17 @@
 """Verification of a plan before a car uses or publishes it.
 
-The optimiser (agent.planner) keeps cars apart with soft hinges, evaluated at five times
-per interval: where the scene is crowded it returns plans that sit inside epsilon, a few
-millimetres where a hinge presses, tens of centimetres where Levenberg-Marquardt stalled
-in a poor local minimum. A plan is therefore checked, independently of how it was made,
-against everything the car planned against (the idea of RMADER's check; Tordesillas and
-How, "Robust MADER", 2022). Over the plan's span [t0, t_end], at the check times t_k:
+The optimiser's hinges are soft, so every plan is checked, independently of how it was
+made, against everything the car planned against (the idea of RMADER's check; Tordesillas
+and How, "Robust MADER", 2022). Over the plan's span, at check times t_k spaced for
+``sample_m`` of relative travel, with half the travel between samples added as slack:
 
-    walls       d(p(t_k))            >= eps_obs - tol (eps_obs - d_obs)        (eq. 6)
-    peer b      |p(t_k) - p_b(t_k)|  >= eps_ab  - tol (eps_ab  - d_ab)         (eq. 9)
-    limits      lag = max_t |int_0^t (|v| - u) dt|  <= limit_lag_m    (first limits_horizon_s)
-                u: the speed of a car that follows |v| as closely as u <= v_max and
-                |du/dt| <= a_max allow
+    walls    d(p(t_k))            >= eps_obs - tol (eps_obs - d_obs)        (eq. 6)
+    peer b   |p(t_k) - p_b(t_k)|  >= eps_ab  - tol (eps_ab  - d_ab)         (eq. 9)
+    limits   lag = max_t |int_0^t (|v| - u) dt|  <= limit_lag_m    (first limits_horizon_s)
 
-A plan that starts nearer than that (the car is already closer: a peer cut in, a late
-plan) may not bring it any nearer than it starts: the check asks the possible, that the
-plan does not make the present worse. p, v, a are the plan's GP mean (agent.gp) and p_b the peer's shared plan (or its
-predicted motion) at the same absolute time; eps_ab the epsilon the plan was made with
-(trust-scaled), d_ab = r_a + r_b + clearance the pair's breach distance, d_obs = r +
-clearance the wall's, v_max and a_max the vehicle's hard limits (VehicleConfig). The
-limits are checked by their effect: a plan asking for more speed or along-track
-acceleration than the car has makes the car fall behind (or, braking, run ahead of) it;
-that lag, along the track, may not pass ``limit_lag_m`` (2 cm) over the near term (a
-brief spike of the soft start prior costs millimetres, a plan the car cannot follow
-costs decimetres). The follower starts at the speed the car has where the plan starts
-(the replan's start state), not at the plan's: a plan that sets off at 0.6 m/s from a
-standstill -- the soft start prior gives way where a hinge presses hard, as between
-cars queued closer than a stranger's epsilon -- is one the car cannot drive (held-out
-intersection-8: honest cars lurched and told futures that did not come true, and their
-peers distrusted them). Turning is the tracking controller's (bridge.trajectory_controller) business.
-
-How strict. ``tol`` (VerifyConfig.tolerance, 0.25) is the share of the margin that
-epsilon keeps beyond the breach distance that a plan may eat: eps - d is room for tracking
-error and for a peer's plan changing before we hear of it, and a hinge that presses is
-in equilibrium slightly inside eps, so demanding eps exactly would reject most plans of
-a crowded scene for millimetres. A quarter of the margin (3.75 cm against a trusted car,
-1.25 cm against a wall) lets those through; the breach distance itself is never eaten,
-and three quarters of the margin remain for what it is there for. A distrusted peer's
-wider epsilon widens its margin and with it the tolerance, in proportion.
-
-Sampling. The check times are spaced so that the car, and every peer relative to it,
-moves about ``sample_m`` (2 cm) between two of them. Distances are 1-Lipschitz in the
-(relative) position, so between two samples a distance can be at most half the travel
-between them below the smaller sampled one; that half of the measured step is added to
-every requirement, so a plan that passes keeps its distances at every instant of the GP
-mean, not only at the samples -- finer than the car-radius spacing the issue asks for.
-Each peer's distances and slack come from one compiled loop (agent.gaps), the follower's
-speeds from another (agent.follower).
-
-Pure: no clock, no I/O; about half a millisecond for a 41-state plan and 3 peers.
+u the speed of a car that follows |v| within v_max and a_max from the speed it has
+(agent.follower); a plan that starts nearer may not bring the car nearer. Pure: no clock,
+no I/O. docs/design/safety.md, "Verified plans".
 """
 
 from __future__ import annotations
