@@ -12,8 +12,8 @@ TRACK_HISTORY_S = 2.0
 
 @dataclass(frozen=True)
 class PlannerConfig:
-    """The factor graph of one car (docs/architecture.md, "The planner"). Sigmas are the standard
-    deviations of each factor's noise model: smaller means stiffer."""
+    """The factor graph of one car (docs/design/planner.md). Sigmas are the standard deviations
+    of each factor's noise model: smaller means stiffer."""
 
     support_states: int = 21
     """N, the number of support states x_i = (p_i, v_i) of a plan."""
@@ -114,7 +114,7 @@ class PlannerConfig:
 
 @dataclass(frozen=True)
 class TrustConfig:
-    """Beta reputation per peer and dimension (docs/architecture.md, "Trust")."""
+    """Beta reputation per peer and dimension (docs/design/trust.md)."""
 
     forgetting: float = 0.85
     """lambda per second: evidence of age s weighs lambda**s (0.85: half-life ~4.3 s)."""
@@ -202,7 +202,7 @@ class TrustConfig:
     the track's 2 s) is planned against where it stands at no more than eps_0, whatever
     its plans say -- with ``planner.transparency`` on, whose widening this undoes. From
     rest a car closes a gap only slowly (1/2 a t^2), and the next replan sees it move
-    (agent.car_agent, "Seen standing"). A caught liar parked beside a goal otherwise
+    (docs/design/trust.md, "Seen standing"). A caught liar parked beside a goal otherwise
     closes it for good."""
     epsilon_gain_fixed: float = 1.0
     """g for every peer when the transparency factor is off (planner.transparency = false):
@@ -240,7 +240,7 @@ class TrustConfig:
 class VerifyConfig:
     """Every plan is checked before a car uses or publishes it (agent.verify); a plan that
     fails is retried from other starting guesses, and without a verified plan the car
-    brakes along its last verified one (agent.safe_plan). docs/architecture.md, "Verified
+    brakes along its last verified one (agent.safe_plan). docs/design/safety.md, "Verified
     plans"."""
 
     enabled: bool = True
@@ -304,7 +304,7 @@ class VerifyConfig:
     keep_s: float = 0.0
     """Keep the plan instead of optimising anew, for up to this long after it was
     optimised, while it still verifies from now against what the car knows now (peers'
-    newest plans and epsilons, the walls, the limits) and the car tracks it (agent.car_agent,
+    newest plans and epsilons, the walls, the limits) and the car tracks it (docs/design/planner.md,
     "Kept plans"); counted as ``plans_kept``. 0: optimise at every replan. A kept plan is
     checked as strictly as a new one but not improved; what it saves is CPU: most replans
     of a car with a clear way."""

@@ -49,7 +49,7 @@ class TrackingConfig:
     derives the judge's from it)."""
     turn_first_deg: float = 60.0
     """A car facing further than this from where its plan goes turns on the spot before it
-    drives (after a stop, say); its peers expect that of it (agent.car_agent, consistency)."""
+    drives (after a stop, say); its peers expect that of it (agent.consistency)."""
 
     def turns_first(self, heading_error_rad: float) -> bool:
         """Does a car this far (wrapped to [-pi, pi]) from its plan's direction turn on the
@@ -64,9 +64,9 @@ class TrackingConfig:
 
 @dataclass(frozen=True)
 class GuardConfig:
-    """The car process's last line of defence (agent.guard): whatever the plan says, a car
-    never drives faster than it can stop before another car seen ahead of it, or a wall.
-    Off in the in-process experiments, which measure the planner's own factors."""
+    """The proximity guard (agent.guard), in every control tick of both simulations and the
+    lab: whatever the plan says, a car never drives faster than it can stop before another
+    car seen ahead of it, or a wall. The experiments' ablations switch it off."""
 
     enabled: bool = True
     """Off: a car's commands are not capped by the guard."""
@@ -157,7 +157,7 @@ class ControlConfig:
 
 @dataclass(frozen=True)
 class OperatorConfig:
-    """The operator's hold on the fleet (docs/architecture.md, "Start and stop"): trials,
+    """The operator's hold on the fleet (docs/design/architecture.md, "Start and stop"): trials,
     the deadman and the bring-up check. Lab configs switch the deadman on."""
 
     deadman_s: float = 0.0
@@ -194,7 +194,7 @@ class OperatorConfig:
 
 @dataclass(frozen=True)
 class BusConfig:
-    """How a process joins the fleet's Zenoh network (docs/architecture.md, "The bus").
+    """How a process joins the fleet's Zenoh network (docs/design/architecture.md, "The bus (Zenoh)").
 
     Simulation and tests: explicit TCP endpoints on 127.0.0.1 and multicast scouting off.
     Lab: multicast scouting on the Wi-Fi interface, listed endpoints, or a router

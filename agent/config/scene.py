@@ -209,9 +209,9 @@ class SimConfig:
     go: ``trustfg sim`` gives the go no sooner after the last car came up, and the
     in-process fleet starts this long before its go. Strangers are planned around with
     the widest epsilon (eps_0 x g_max at the prior's lower bound): cars that start closer
-    than that plan away from each other at the go and fail each other's consistency;
-    two seconds of standing plans seen to come true lift every peer of a fault-free fleet
-    to >= 0.8 by the go (a lab's operator gives it later still)."""
+    than that would plan away from each other at the go and fail each other's
+    consistency; two seconds of standing plans seen to come true lift every peer off the
+    prior by the go (a lab's operator gives it later still)."""
 
     def validate(self, path: str) -> None:
         positive(self.timeout_s, f"{path}.timeout_s")
