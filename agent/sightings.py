@@ -2,8 +2,8 @@
 
 Position, velocity and acceleration at the latest observation come from a least-squares
 quadratic fit p(t) = c0 + c1 (t - t_last) + c2 (t - t_last)^2 over the last
-``window_s`` seconds, so p = c0, v = c1, a = 2 c2: noise on single frames averages out
-without the lag of a low-pass filter on finite differences.
+``window_s`` seconds (agent.motion_fit), so p = c0, v = c1, a = 2 c2: noise on single
+frames averages out without the lag of a low-pass filter on finite differences.
 """
 
 from __future__ import annotations
@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .config.planning import TRACK_HISTORY_S
+from .motion_fit import quadratic_fit
 
 NEAREST_S = 0.05
 """An observation stands for a moment this close to it (Track.position_at)."""
@@ -100,10 +101,8 @@ class Track:
         recent = samples[np.searchsorted(samples[:, 0], t_last - self.window_s):]
         if len(recent) < 4:
             return Motion(t_last, np.array([x, y]), np.zeros(2), np.zeros(2), yaw)
-        tau = recent[:, 0] - t_last
-        design = np.stack([np.ones_like(tau), tau, tau**2], axis=1)
-        coef, *_ = np.linalg.lstsq(design, recent[:, 1:3], rcond=None)
-        return Motion(t_last, coef[0], coef[1], 2.0 * coef[2], yaw)
+        position, velocity, acceleration = quadratic_fit(recent[:, 0], recent[:, 1:3], t_last)
+        return Motion(t_last, position, velocity, acceleration, yaw)
 
     def position_at(self, t: float) -> np.ndarray | None:
         """The observed position at time t (nearest sample within NEAREST_S), if any."""
