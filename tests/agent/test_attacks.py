@@ -90,7 +90,7 @@ def test_false_yield_is_true_now_and_announces_a_stop_it_does_not_make():
     told, _ = liar("false-yield", stop_s=0.5).plan(plan, NOW, None, {})
     assert np.allclose(told.position_at(NOW), plan.position_at(NOW))
     stop = told.position_at(NOW + 3.0)[0, 0]
-    assert stop == pytest.approx(0.4 * 0.25, abs=0.01)  # braked to a stop 0.1 m on
+    assert stop == pytest.approx(0.4 * 0.25, abs=0.01)  # braked, it stands 0.1 m on
     assert plan.position_at(NOW + 3.0)[0, 0] == pytest.approx(1.2)
 
 

@@ -1,5 +1,5 @@
 """A change of mind whose notice was lost in the network is not held against a peer
-(agent.audit, "Lost notices"); a liar cannot use the rule to escape for longer than
+(docs/design/trust.md, "Lost notices"); a liar cannot use the rule to escape for longer than
 replanning every period would let it."""
 
 from collections import Counter

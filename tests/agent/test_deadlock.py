@@ -141,7 +141,7 @@ def test_with_resolution_off_deadlocks_are_counted_but_nobody_gives_way(room):
     assert two.deadlocks == 1 and two.yields == 0
 
 
-# A parked car that walls a peer in (bottleneck-4): a wall across the room with a 1.2 m
+# A parked car that walls a peer in (a bottleneck): a wall across the room with a 1.2 m
 # gap on the right; we are parked in the gap, the peer stands in the pocket below.
 POCKET_WALL = Obstacle(kind="rect", min=(-1.5, -0.05), max=(0.3, 0.05))
 PARKED_IN_GAP = np.array([0.9, 0.0])
@@ -203,28 +203,27 @@ def test_a_step_aside_holds_while_the_peer_is_walled_in_and_ends_once_it_is_thro
 
 
 def test_a_peer_stopped_a_little_inside_the_wall_clearance_is_walled_in_all_the_same(pocket, monkeypatch):
-    """A held-out field (random-field-6-s2112039423, seed 6): the stalled car had stopped
-    1.5 cm nearer a pillar than eps_obs, so no way led from its own cell with the parked car
-    or without it, and the parked car never stepped aside. Its region is the nearest free
-    cell's (routes.SNAP_M)."""
+    """A stalled car stopped 1.5 cm nearer a pillar than eps_obs: no way leads from its own
+    cell, with the parked car or without it, so read by its own cell alone it would never
+    count as walled in by the parked car. Its region is the nearest free cell's
+    (routes.SNAP_M)."""
     inside = PeerSeen(np.array([-0.7, -0.05 - WALL_CLEAR + 0.015]), goal=WALLED_IN.goal)
     assert float(pocket.distance(inside.position)) < WALL_CLEAR
     assert connected(pocket, inside.position, inside.goal, WALL_CLEAR, [])
     watch = DeadlockWatch(1, CONFIG)
     assert any(a is not None for a in parked_for(watch, CONFIG.window_s + 1.0, pocket, peer=inside))
     import trustfg.agent.routes as routes
-    monkeypatch.setattr(routes, "SNAP_M", 0.0)  # a point's own cell only, as before
+    monkeypatch.setattr(routes, "SNAP_M", 0.0)  # a point's own cell only
     assert not connected(pocket, inside.position, inside.goal, WALL_CLEAR, [])
     watch = DeadlockWatch(1, CONFIG)
     assert all(a is None for a in parked_for(watch, CONFIG.window_s + 1.0, pocket, peer=inside))
 
 
 def test_a_stuck_peer_pressed_into_the_pinch_between_us_and_a_wall_is_walled_in(pocket):
-    """A held-out field (random-field-6-s93374344, seed 3): a car stood for good in the
-    pinch between a pillar's corner and a car parked at its goal, 0.43 m from the parked
-    car, its goal beyond the pinch. Its region's nearest free cell (routes.SNAP_M) lay
-    on the far side, so it counted as having a way with the parked car where it stood,
-    and the parked car never stepped aside (233 fallbacks, 48 s). A stuck peer inside our
+    """A car stuck in the pinch between a pillar's corner and a car parked at its goal, 0.43
+    m from the parked car, its goal beyond the pinch. Its region's nearest free cell
+    (routes.SNAP_M) lies on the far side, so it would count as having a way with the
+    parked car where it stands, and would stand there for good. A stuck peer inside our
     keep-out is walled in by us whatever the snap says."""
     parked = np.array([0.98, 0.0])  # the gap to the wall's end is 0.68 m: 0.7 m would pass
     pressed = PeerSeen(np.array([0.55, 0.01]), goal=WALLED_IN.goal)  # a centimetre past the narrowest line
@@ -250,9 +249,9 @@ def test_a_point_deep_in_a_wall_is_in_no_region(pocket):
 
 @pytest.mark.parametrize("halting", [True, False])
 def test_a_peer_creeping_with_every_plan_ending_short_of_its_goal_is_stuck(pocket, halting):
-    """bottleneck-4 seed 4: the walled-in car crept 2.5 cm/s on its fallback, more than
-    progress_m a window, so it never counted as stalled and the parked car never stepped
-    aside. Every plan it sends ending at rest short of its goal makes it stuck all the same."""
+    """A walled-in car creeping at 2.5 cm/s on its fallback comes more than progress_m a
+    window nearer its goal, so it never counts as stalled. Every plan it sends ending at
+    rest short of its goal makes it stuck all the same, and the parked car steps aside."""
     watch = DeadlockWatch(1, CONFIG)
     creep = 2.5 * CONFIG.progress_m / CONFIG.window_s  # m/s: 2.5 progress_m a window
     asides = []
@@ -264,7 +263,7 @@ def test_a_peer_creeping_with_every_plan_ending_short_of_its_goal_is_stuck(pocke
     assert any(a is not None for a in asides) is halting
 
 
-# Where a car gives way to (t-junction-6 seed 49): a road 1.2 m wide, closed at both ends.
+# Where a car gives way to (a T-junction's road): a road 1.2 m wide, closed at both ends.
 # Car 6 stands near the east end; car 4, which goes first, stands at the west end and
 # means to reach the east end's north lane, beside car 5 parked there.
 @pytest.fixture(scope="module")
@@ -304,8 +303,8 @@ def first_detour(peers: dict, room) -> np.ndarray:
 
 def test_a_detour_keeps_off_every_peers_goal(room):
     """Car 3, far off and driving, means to park where car 2 would give way to; a car that
-    gave way there would wall car 3 out of its goal (t-junction-6 seed 49: cars 4 and 6
-    each stood on the other's goal)."""
+    gave way there would wall car 3 out of its goal (two cars that each give way onto the
+    other's goal stand there for good)."""
     alone = first_detour({}, room)
     three = PeerSeen(np.array([0.0, 2.5]), goal=alone)
     detour = first_detour({3: three}, room)
@@ -325,10 +324,10 @@ def test_a_peer_is_seen_stuck_exactly_when_its_latest_plan_says_so():
 
 
 def test_a_parked_car_steps_aside_for_a_peer_that_it_walls_in_with_a_car_that_stands(road):
-    """A road's dead end (a held-out T-junction, seed 8): car 4 parked in the north lane,
+    """A road's dead end (a T-junction): car 4 parked in the north lane,
     car 5 stuck beside it in the south lane on its way to the north lane's end, car 6
     stuck at the south lane's end on its way west. Cars 4 and 6 together wall car 5 in;
-    counting parked cars alone, car 4 did not (car 5 would have a way), and car 6 has
+    counting parked cars alone, car 4 does not (car 5 would have a way), and car 6 has
     nowhere to give way to. Car 4 steps aside along the road, and holds while car 6
     stands."""
     home = np.array([1.77, 0.28])

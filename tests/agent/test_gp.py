@@ -101,8 +101,8 @@ def test_one_time_gives_the_numbers_of_many_times():
 
 
 def numpy_state_at(plan, t):
-    """The numpy form state_at had before agent.interpolate took its many times: the
-    reference the compiled loop must match to the last bit."""
+    """state_at in numpy operations: the reference the compiled loop (agent.interpolate)
+    must match to the last bit."""
     s = (t - plan.t0) / plan.dt
     index = np.minimum(np.maximum(np.floor(s), 0.0), plan.n - 2).astype(np.intp)
     u = np.minimum(np.maximum(s - index, 0.0), 1.0)[:, None]

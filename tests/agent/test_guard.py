@@ -189,8 +189,8 @@ def spiralling(seed: int, guard: bool) -> float:
 @pytest.mark.parametrize("seed", range(30))
 def test_a_car_spiralling_in_on_a_stopped_car_never_breaches(seed):
     breach = SAFETY.breach_distance(RADIUS, RADIUS)
-    assert spiralling(seed, guard=False) < breach - 0.05  # without the guard: 0.16-0.22 m
-    assert spiralling(seed, guard=True) >= breach + 0.01  # 0.320-0.326 m (the cone alone: 0.16-0.31 m)
+    assert spiralling(seed, guard=False) < breach - 0.05  # without the guard it closes in far inside
+    assert spiralling(seed, guard=True) >= breach + 0.01  # with it, a centimetre of margin (the cone alone is not enough)
 
 
 def test_reaction_time_is_the_pose_age_plus_the_command_hold_within_bounds():
@@ -201,9 +201,9 @@ def test_reaction_time_is_the_pose_age_plus_the_command_hold_within_bounds():
 
 def starved_approach(seed: int, measured: bool) -> float:
     """A car drives at a car that stands still (it cannot react) from a control loop
-    starved of CPU: ticks late by 0-5 ms mostly, 20-130 ms often, and stalled for 0.2-1 s
-    now and then (eight car processes on two cores: jitter p99 78-132 ms, stalls to 1.6 s);
-    poses 10-60 ms old at a tick. The car holds each command until the next one, or stops
+    starved of CPU, as eight car processes on two cores starve it: ticks late by 0-5 ms
+    mostly, 20-130 ms often, and stalled for 0.2-1 s now and then; poses 10-60 ms old at a
+    tick. The car holds each command until the next one, or stops
     when its 250 ms watchdog runs out. The guard's reaction time is either measured (the
     pose's age plus the longest gap of the last 5 s, as the car process does) or the
     configured 0.1 s. Physics at 5 ms. Returns the least centre distance."""
@@ -271,12 +271,12 @@ def turning_in(seed: int, sweep: bool) -> float:
 
 @pytest.mark.parametrize("seed", range(40))
 def test_a_car_turning_into_a_car_beside_it_keeps_the_stop_distance(seed):
-    assert turning_in(seed, sweep=True) >= SAFETY.breach_distance(RADIUS, RADIUS) + 0.01  # 0.343 m least
+    assert turning_in(seed, sweep=True) >= SAFETY.breach_distance(RADIUS, RADIUS) + 0.01  # a centimetre beyond the breach distance
 
 
 def test_checking_the_present_heading_alone_breaches_in_a_turn():
     least = [turning_in(seed, sweep=False) for seed in range(40)]
-    assert sum(d < SAFETY.breach_distance(RADIUS, RADIUS) for d in least) >= 10  # 17 of 40, down to 0.265 m
+    assert sum(d < SAFETY.breach_distance(RADIUS, RADIUS) for d in least) >= 10  # a quarter of the seeds at least
 
 
 def test_capped_below_answers_as_the_cap_does(intersection_sdf):

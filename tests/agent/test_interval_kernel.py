@@ -103,9 +103,9 @@ def test_states_that_are_not_finite_are_refused(sdf, bad):
 
 
 def test_one_compiled_signature_whatever_the_layout_of_the_states(sdf):
-    """GTSAM hands the states over in column order: without the wrapper's conversion every
-    process compiled the loop a second time (1.7 s) in its first plan, and a car process
-    let its command loop's permit lapse meanwhile."""
+    """GTSAM hands the states over in column order: without the wrapper's conversion a
+    process would compile the loop a second time in its first plan, long enough for a car
+    process to let its command loop's permit lapse."""
     rng = np.random.default_rng(5)
     problem, positions, velocities = problem_and_states(rng, sdf, 11, 2, True, 1)
     for order in ("C", "F"):

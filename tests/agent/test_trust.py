@@ -141,8 +141,8 @@ def test_self_testimony_and_testimony_about_the_receiver_are_ignored():
 
 
 def cumulative_fusion(book, peer, now):
-    """Fusion as it was before: every accepted testimony's discounted evidence is added to
-    our own (no cap, no averaging, no "only more careful") -- the defences removed."""
+    """Cumulative fusion, the control: every accepted testimony's discounted evidence is
+    added to our own (no cap, no averaging, no "only more careful") -- the defences removed."""
     c = book.config
     own = book.opinion(peer, now)
     book._decay(own, now)

@@ -1,6 +1,6 @@
 """Each defence of trust against a liar, shown twice: the attack fails with the defence,
 and succeeds when the defence is taken away (a config switch, or the mechanism replaced
-by what was there before). One car (the observer) watches one peer drive along a
+by a plainer one). One car (the observer) watches one peer drive along a
 straight line and hears its plans, as a car process would (agent.evidence, agent.audit,
 agent.clocks, agent.trust)."""
 
@@ -220,7 +220,7 @@ def test_a_tailgated_car_is_not_blamed(intersection):
     breach = 0.3
     assert evidence.safety_verdict(victim, [(framer, breach)], config) == (1.0, 0.0)
     assert evidence.safety_verdict(framer, [(victim, breach)], config) == (0.0, 1.0)
-    anyone_close = dataclasses.replace(config, blame_closing_mps=-np.inf)  # the rule before: blame both
+    anyone_close = dataclasses.replace(config, blame_closing_mps=-np.inf)  # the plainer rule: blame both
     assert evidence.safety_verdict(victim, [(framer, breach)], anyone_close) == (0.0, 1.0)
 
 
@@ -242,7 +242,7 @@ def test_two_small_lies_separate_a_liar_and_pass_as_noise_when_graded(intersecti
                                                                       monkeypatch):
     """A peer at 0.2 m/s replays its plan of 1 s ago twice (at 2.0 and 2.4 s): each claims
     it is 0.2 m behind where it is -- beyond the 0.15 m tolerance, under the 0.3 m at which
-    a plan is refused (intersection seed 47's liar, in the adversary table). Whole failures
+    a plan is refused. Whole failures
     put it 0.2 below an honest peer at once; graded from 1x to 2x the tolerance (a third
     of a failure each), it stays within 0.15 of one."""
     path = straight(0.2)
@@ -264,9 +264,9 @@ def test_two_small_lies_separate_a_liar_and_pass_as_noise_when_graded(intersecti
 def test_a_caught_liar_seen_standing_is_kept_at_eps_0_where_it_stands_and_not_once_it_moves(
         intersection, intersection_sdf, seed):
     """A liar caught lying (displaced plans) parks: with ``standing_seen_s`` it is planned
-    against where it is seen, at eps_0 (a caught liar parked beside a goal closed it, README
-    "held out since stop 39"); without, at the wide epsilon of its distrust; and the rule
-    lets go of a liar that drives."""
+    against where it is seen, at eps_0 (kept wide, a caught liar parked beside a goal closes
+    it to everyone); without, at the wide epsilon of its distrust; and the rule lets go of a
+    liar that drives."""
     attack, eps_0 = AttackConfig("displaced"), 0.45
     seeing = replace(intersection, trust=replace(intersection.trust, standing_seen_s=1.0))
     blind = replace(intersection, trust=replace(intersection.trust, standing_seen_s=0.0))
@@ -291,8 +291,8 @@ def test_an_honest_peer_seen_standing_keeps_its_epsilon_and_its_plan(intersectio
                                                                      monkeypatch):
     """The rule acts on distrusted peers only: an honest car parked 1.5 s, still little
     known (epsilon wider than eps_0, from the lower bound of its trust), is planned against
-    with its own plan and epsilon -- it may have announced that it leaves (bottleneck-4 seed
-    25 stood 18 s in a standoff when waiting honest cars were taken for cars that stay)."""
+    with its own plan and epsilon -- it may have announced that it leaves (cars that take
+    waiting honest cars for cars that stay stand off, each waiting for the other)."""
     eps_0 = 0.45
     seeing = replace(intersection, trust=replace(intersection.trust, standing_seen_s=1.0))
     agent = watch(seeing, intersection_sdf, seed, speed=0.0, seconds=1.5)

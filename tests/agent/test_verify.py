@@ -118,10 +118,10 @@ def test_a_plan_faster_than_the_car_fails_on_its_limits(room):
 
 def test_a_plan_that_sets_off_faster_than_the_car_moves_fails_on_its_limits(room):
     """A plan at 0.5 m/s from its first instant is drivable by a car already at 0.5 m/s,
-    not by one standing there: the follower starts at the car's speed (held-out
-    intersection-8: queued cars' plans set off at 0.6 m/s from a standstill)."""
+    not by one standing there: the follower starts at the car's speed (pressed by a hinge,
+    a queued car's plan may set off at 0.6 m/s from a standstill)."""
     cruise = line((-2.0, 0.0), (2.0, 0.0), duration=8.0)  # 0.5 m/s from the start
-    assert verify(cruise, [], bounds(0), room, CONFIG).ok  # the plan's own speed: as before
+    assert verify(cruise, [], bounds(0), room, CONFIG).ok  # from the plan's own speed
     assert verify(cruise, [], bounds(0), room, CONFIG, start_speed=0.5).ok
     verdict = verify(cruise, [], bounds(0), room, CONFIG, start_speed=0.0)
     assert not verdict.ok and verdict.conflicts[0].kind == "limits"
