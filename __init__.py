@@ -5,14 +5,13 @@ them under this package, so everything imports as ``trustfg.<layer>``:
 
 * ``trustfg.agent``     one car's mind, pure: planner, trust, plans, messages, config
 * ``trustfg.bridge``    one car's links and control: NatNet, car link, tracking, guard
-* ``trustfg.fleet``     processes and their orchestration: bus, car process, launcher,
-                        in-process fleet, experiments, recordings, the fault lab
+* ``trustfg.fleet``     processes: bus, car process, launcher, experiments, fault lab
 * ``trustfg.mocap_sim`` the stand-in hardware: simulated cars and OptiTrack
 * ``trustfg.dashboard`` what people look at: the live page and reports
 * ``trustfg.deploy``    configs that ship: scenarios, lab fleets, Zenoh variants
 
 A layer imports only layers listed above it here (agent at the bottom); ``trustfg.cli``,
-the command, sits on top of all. docs/architecture.md tells the whole story.
+the command, sits on top of all. docs/design/architecture.md tells the whole story.
 """
 
 __version__ = "0.3.0"

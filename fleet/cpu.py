@@ -1,20 +1,14 @@
 """How much CPU each process of a run uses, from the kernel's own accounting.
 
-``/proc/PID/stat`` holds, in clock ticks, the user and system time of the whole process:
-fields 14 (utime) and 15 (stime) sum over all its threads, live and exited (proc(5)).
-The share of one core over an interval is the growth of utime + stime over the wall
-time between two reads: 1.0 is one core busy all the time, 2.0 two cores.
-
-:class:`CpuMeter` reads every process it is given at each ``sample()`` and keeps the
-first read, the last read and named marks (e.g. the go and the first arrival), so a
-process that dies early still has the reads it had; ``summary()`` turns them into shares.
-Parsing is pure (:func:`parse_stat_ticks`), reading is a thin wrapper around it.
-
-Inside a car process: :class:`Sections` books its main thread's CPU time to the section of
-the loop it was spent in, and :func:`snapshot` / :func:`breakdown` turn two moments of
-that and of the kernel's per-thread counts (the process's and its command loop's) into
-where the car's CPU went between them (fleet.car.process: while the car drives).
-:func:`machine_load` says whether a run's processes saturated the cores it may use.
+``/proc/PID/stat`` holds, in clock ticks, the user and system time of the whole process
+(fields 14 and 15, over all its threads, live and exited: proc(5)); a share of one core is
+the growth of utime + stime over the wall time between two reads. :class:`CpuMeter` reads
+every process it is given at each ``sample()`` and keeps the first and last reads and named
+marks (the go, the first arrival), so a process that dies early keeps what it had. Parsing
+is pure (:func:`parse_stat_ticks`). Inside a car process, :class:`Sections` books the main
+thread's CPU to the section of its loop, and :func:`snapshot` / :func:`breakdown` tell
+where the car's CPU went while it drove; :func:`machine_load` says whether a run's
+processes saturated the cores. docs/design/architecture.md, "CPU accounting".
 """
 
 from __future__ import annotations
@@ -247,12 +241,11 @@ def machine_load(cpu: dict[str, dict | None], cores: int, until: str = "first_ar
 
 
 CAR_SHARE = 0.2
-"""About what one car process takes of a core while the fleet drives, its command loop
-included: 0.15-0.17 with 3 peers, 0.20-0.25 with 7 (``benchmarks/bench_cpu.py``, 2 cores
-AMD EPYC, stops 45-54; docs/architecture.md "CPU"). A rough figure for a warning before a
-run, not a budget: more peers take more."""
+"""About what one car process takes of a core while the fleet drives, its velocity loop
+included, with a few peers (docs/results/performance.md#cpu-of-a-car-process). A rough
+figure for a warning before a run, not a budget: more peers take more."""
 FLEET_SHARE = 0.15
-"""mocap-sim and the launcher together in the same runs (0.07-0.11 and 0.05)."""
+"""About what mocap-sim and the launcher take together, in cores."""
 
 
 def capacity_note(cars: int, cores: int) -> str | None:

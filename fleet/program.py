@@ -53,9 +53,9 @@ class _HelpWithDefaults(argparse.RawDescriptionHelpFormatter):
 
 class _OneLineErrors(argparse.ArgumentParser):
     """A usage error is one line on stderr and exit status 2. An option is named whole:
-    argparse's abbreviations took ``trustfg faults --seed 40`` (there is no ``--seed``)
-    for ``--seeds 40`` and ran another matrix without a word. (Subcommands' parsers are of
-    this class too, so they refuse abbreviations as well.)"""
+    with argparse's abbreviations ``trustfg faults --seed 40`` (there is no ``--seed``)
+    would be taken for ``--seeds 40`` and run another matrix without a word. (Subcommands'
+    parsers are of this class too, so they refuse abbreviations as well.)"""
 
     def __init__(self, *args, allow_abbrev: bool = False, **kwargs):
         super().__init__(*args, allow_abbrev=allow_abbrev, **kwargs)

@@ -33,7 +33,7 @@ KINDS = ("plan", "trust", "pose", "status")
 """What a car publishes under its own keys."""
 HEARD_BY_CARS = ("plan", "trust")
 """What a car receives of its peers': its agent reads plans and trust reports only (poses
-and status are for observers; subscribing a car to them doubled what it decoded)."""
+and status are for observers; subscribing a car to them would double what it decodes)."""
 ALIVE = "alive"
 CLOCK = "clock"
 START = "start"

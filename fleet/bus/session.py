@@ -56,10 +56,9 @@ def present(alive: dict[int, bool], heard: dict[tuple[int, str], float], now: fl
     """Which cars are on the bus: those whose liveliness token is up, and those whose token
     never reached us but that were heard on some kind within ``SILENT_S``. Between two
     peers that both listen on TCP and UDP, Zenoh 1.10 now and then never delivers one's
-    token to the other (README, benchmarks/bench_zenoh_start.py: 11 of about 1,270
-    starts), though the other's samples arrive; such a car is on the bus by what we hear
-    of it, for as long as we hear it. A car whose token went down has left, whatever
-    arrives late from it."""
+    token to the other, though the other's samples arrive (docs/results/zenoh-liveliness.md);
+    such a car is on the bus by what we hear of it, for as long as we hear it. A car whose
+    token went down has left, whatever arrives late from it."""
     out = dict(alive)
     for (car, kind), at in heard.items():
         if kind in KINDS and car not in alive:  # a car's kinds: the operator (0) has no token
@@ -77,16 +76,13 @@ def silent_kinds(heard: dict[tuple[int, str], float], alive: dict[int, bool], ki
     a car only starting has no plan to send for its first few tenths of a second).
 
     The bus subscribes to such a kind again, at most every ``RESUBSCRIBE_EVERY_S``
-    (counted: ``resubscribed_<kind>``). Four peers opening their sessions to each other at
-    once sometimes end with one of them never getting one kind from one other, or none at
-    all, though the other's liveliness token reached it and it reaches the other (this
-    machine, Zenoh 1.10, a script of bare sessions under load: 4 of 76 starts with every
-    peer dialling every other, 1 of 76 with only the higher id dialling; in CI a car drove
-    a whole run without one peer's plans, and in another without anything from one peer
-    after the first seconds). A frequent kind (plans, poses) is subscribed again sooner:
-    at 50 % loss the redeclared subscription itself takes a second or two to reach the
-    peer, and three seconds of silence first left a car without a peer's plans for 4.5 s
-    of a run (CI, loss-50). A car that only stopped publishing K, or is cut off behind a
+    (counted: ``resubscribed_<kind>``). Peers that open their sessions to each other at
+    once sometimes end with one of them never getting one kind from another, or nothing at
+    all, though the other's liveliness token reached it and it reaches the other
+    (benchmarks/bench_zenoh_start.py reproduces it). A frequent kind (plans, poses) is
+    subscribed again sooner: at 50 % loss the redeclared subscription itself takes a second
+    or two to reach the peer, which on top of SILENT_S would leave a car without a peer's
+    plans for several seconds. A car that only stopped publishing K, or is cut off behind a
     partition, costs a redeclaration every few seconds, no more."""
     out: dict[str, list[int]] = {}
     first = first or {}
@@ -191,11 +187,11 @@ class FleetBus:
             cid = self.car_id
             # Plans go two ways. Best effort (on a UDP link, ``?rel=0``, where the peers have
             # one), repeated every control.plan_period_s: a lost plan is replaced by the next
-            # instead of retransmitted, which over TCP at heavy loss held every later plan back
-            # for seconds. And reliable, each new plan once, through an advanced publisher with
-            # a cache of 1: late joiners and peers back from a partition get the latest at once
-            # (the best-effort path alone took seconds to resume). Whichever copy arrives first
-            # is taken; the other is dropped by the Inbox as a repeat of its sequence number.
+            # instead of retransmitted, which over TCP at heavy loss would hold every later plan
+            # back for seconds. And reliable, each new plan once, through an advanced publisher
+            # with a cache of 1: late joiners and peers back from a partition get the latest at
+            # once, not seconds later. Whichever copy arrives first is taken; the other is
+            # dropped by the Inbox as a repeat of its sequence number.
             self._publishers["plan"] = session.declare_publisher(
                 key(fleet, cid, "plan"), reliability=zenoh.Reliability.BEST_EFFORT, express=True,
                 congestion_control=zenoh.CongestionControl.DROP)
@@ -204,8 +200,8 @@ class FleetBus:
                 publisher_detection=True, sample_miss_detection=zext.MissDetectionConfig(heartbeat=0.5),
                 reliability=zenoh.Reliability.RELIABLE, congestion_control=zenoh.CongestionControl.DROP)
             # Trust reports best effort too: each supersedes the last (every
-            # control.trust_report_period_s), and at 50 % loss a reliable report waited
-            # behind TCP retransmissions for up to 13 s, then came stale.
+            # control.trust_report_period_s), and at heavy loss a reliable report would wait
+            # behind TCP retransmissions for seconds and arrive stale.
             self._publishers["trust"] = session.declare_publisher(
                 key(fleet, cid, "trust"), reliability=zenoh.Reliability.BEST_EFFORT, express=True,
                 congestion_control=zenoh.CongestionControl.DROP)
@@ -233,8 +229,8 @@ class FleetBus:
             else:
                 # The latest start or stop from the publisher's cache when it is found, and again
                 # whenever its heartbeat (every 0.5 s) tells of one we missed: the start is put
-                # once, and in CI two of four cars behind a router never got it (the history
-                # alone had asked before it was put) and waited out the run.
+                # once, and a car whose history query came before the put would otherwise never
+                # get it.
                 self._entities.append(zext.declare_advanced_subscriber(
                     session, fleet_key(fleet, name), self._on_sample,
                     history=zext.HistoryConfig(detect_late_publishers=True, max_samples=1),
@@ -294,7 +290,7 @@ class FleetBus:
         """Nothing from any live car for DEAF_S: a deaf spell, counted (``deaf_spells``,
         ``deaf_ms_max``) and told with the session's links when it starts and ends. It is
         what stalls a whole process's receiving, not one subscription, as Zenoh's lingering
-        TCP closes did (fleet.bus.zenoh_setup.RX_THREADS)."""
+        TCP closes can (fleet.bus.zenoh_setup.RX_THREADS)."""
         last = max([self._opened, *(at for (car, _), at in heard.items() if car in alive)])  # cars, not the operator
         up = sum(alive.values())
         if up and now - last > DEAF_S and self._deaf_since is None:

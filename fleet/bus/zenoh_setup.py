@@ -23,10 +23,10 @@ RX_THREADS = 8
 """Zenoh's receiving threads per process (its default is 2). Zenoh drops a TCP link that
 could not flush for a quarter of its lease, and the dropped socket lingers in close() --
 SO_LINGER of 10 s, compiled into Zenoh -- inside a receiving thread while unsent data
-waits. At 50 % loss two such closes at once left a car hearing nothing from any peer for
-2-10 s (gdb: both rx threads in close()). A blocked thread sleeps: more of them cost no
+waits. Under heavy loss two such closes at once leave a process with Zenoh's two threads
+hearing nothing from any peer for seconds. A blocked thread sleeps: more of them cost no
 CPU, and the others go on receiving. Upstream: eclipse-zenoh/zenoh#1101 (a dropped TCP
-link blocks its runtime thread for the linger; open, no setting for it in Zenoh 1.10)."""
+link blocks its runtime thread for the linger; Zenoh 1.10 has no setting for it)."""
 
 
 class BusError(RuntimeError):
@@ -41,10 +41,10 @@ def zenoh_config(bus: BusConfig, extra_listen: tuple[str, ...] = ()) -> zenoh.Co
     ``max_links`` come from the file when it sets them, and a ``[bus]`` value that differs
     both from the file's and from its own default is an error naming both (BusError).
     Zenoh's config answers its own default for a setting a file leaves out, so a file
-    value equal to Zenoh's default counts as not set: a lab's file that did not mention
-    ``max_links`` left every car one link per peer (Zenoh's 1), no UDP link beside the
-    TCP one, and plans queued behind TCP's retransmissions. To ask for Zenoh's default
-    value, set it in ``[bus]``."""
+    value equal to Zenoh's default counts as not set: otherwise a lab's file that does not
+    mention ``max_links`` would leave every car one link per peer (Zenoh's 1), no UDP link
+    beside the TCP one, and plans queued behind TCP's retransmissions. To ask for Zenoh's
+    default value, set it in ``[bus]``."""
     try:
         try:
             config = zenoh.Config.from_file(str(Path(bus.zenoh_config))) if bus.zenoh_config else zenoh.Config()
@@ -105,7 +105,7 @@ def config_value(config: zenoh.Config, path: str):
 
 def _merged(theirs, ours: list[str]) -> list[str]:
     """The file's endpoints, then ours. Per-mode lists (a map) are Zenoh's defaults, which
-    ours replace as before."""
+    ours replace."""
     if isinstance(theirs, dict):
         theirs = []
     merged = []

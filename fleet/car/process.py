@@ -1,44 +1,16 @@
 """``trustfg car --id N --config FILE``: one car's process, agent and bridge together.
 
-Threads and one process of its own, each owning what it touches:
-
-* the NatNet client has no thread: each pass of the main loop takes the datagrams
-  waiting on its socket (bridge.natnet_client, "Pull"), and every frame, at most at the
-  command rate, goes to a queue stamped with its arrival (the client keeps the latest
-  pose of every rigid body);
-* Zenoh's callbacks hand every fleet message to the bus queue (trustfg.fleet.bus.session);
-* the command loop, a process of its own (fleet.car.velocity_loop), at
-  ``control.command_rate_hz`` on absolute deadlines from the moment the process starts,
-  reads the car's own latest pose (its own NatNet client) and the current plan and sends
-  one command datagram: the tracking command, or STOP when there is no fresh pose (older
-  than ``control.pose_timeout_s``, or no Motive yet), no plan, or the operator's protocol
-  (agent.operator_state: waiting, arrived, e-stopped, before the departure, deadman) does not
-  let the car drive; E_STOP while e-stopped, RELEASE after a release. The tracking speed
-  is capped by the proximity guard (agent.guard) against the other cars it sees and the
-  walls of the map. It PINGs the car and reads the answers (the link is up; the car's
-  e-stop latch). It drives only on a *permit* this process renews on every pass of its
-  main loop, valid for ``control.lease_s``: an agent that hangs or dies stops its car;
-* the main thread runs the agent: it drains frames and messages, hands the operator's
-  messages to the :class:`~trustfg.agent.operator_state.Operation`, gathers evidence, replans
-  every ``control.replan_period_s`` and publishes plan, trust, pose and status (at once
-  when the mode changes). Each trial's start gives the car a fresh agent.
-
-Starting before Motive, the bus or the peers are reachable, the process keeps its car
-stopped (STOP from the first tick), says in one line what it waits for -- again whenever
-that changes -- and retries (NatNet from a connector thread, the bus every
-``control.retry_s``): never a traceback.
-
-A car that does not move although it is told to is *stuck* (bridge.motion_watch): the
-process keeps commanding its plan but tells its peers the truth, a plan that stands still.
-
-The planner (GTSAM, numpy) holds this interpreter's lock while it works; the command loop
-has an interpreter of its own (and real-time priority where the OS grants it), and its
-timing (command rate, lateness) is measured and reported. SIGTERM or SIGINT stops the
-loops, has the command loop send STOP to the car, and closes every socket and session.
-``--stats FILE`` writes a JSON summary at exit.
-
-The car is chosen by addresses in the config (its NatNet server, its ``link``), never by
-a simulation switch: the same process drives a real car or one of mocap_sim's.
+The main thread runs the agent: each pass pulls the waiting NatNet datagrams (the client has
+no thread), drains the fleet messages Zenoh's callbacks queued (fleet.bus.session), hands
+the operator's messages to :class:`~trustfg.agent.operator_state.Operation`, gathers
+evidence, replans every ``control.replan_period_s`` and publishes plan, trust, pose and
+status. The 50 Hz velocity loop is a process of its own (fleet.car.velocity_loop, fed
+through fleet.car.velocity_handle): it commands STOP from the first tick and drives only
+on a permit this loop renews on every pass. Before Motive, the bus or the peers answer,
+the process holds its car, says in one line what it waits for and retries; a car told to
+drive that does not move is *stuck*, and its plans say so. The car is chosen by addresses
+in the config, never by a simulation switch. docs/design/architecture.md, "The car
+process", tells the whole of it.
 """
 
 from __future__ import annotations

@@ -1,41 +1,15 @@
-"""A car's command loop, in a process of its own: the 50 Hz ticks never wait for planning.
+"""A car's velocity loop, in a process of its own: the 50 Hz ticks never wait for planning.
 
-The car process (fleet.car.process) spawns it through its handle
-(fleet.car.velocity_handle) and feeds it through one pipe:
-
-* ``("plan", plan)``: every new plan the agent made (agent.gp.Plan, or None);
-* ``("permit", Permit)``: what the operator's protocol lets the car do now -- may it
-  drive, is it at its goal, is it e-stopped or released, the turn between laps -- valid
-  until a *lease* runs out (``control.lease_s`` on ``time.monotonic()``, which every
-  process of a host shares); the car process renews it on every pass of its main loop;
-* ``("quit",)``: stop.
-
-The loop owns, each for itself: a NatNet client (the car's own pose and the other cars
-the proximity guard keeps clear of, fresh whatever the agent's interpreter is doing), the
-car link (commands, PINGs, the car's answers) and, at ``control.command_rate_hz`` on
-absolute deadlines, the control step both simulations share (bridge.drive: tracking and
-the guard), the turn between laps, the motion watch (bridge.motion_watch) and the loop's
-timing (fleet.car.report.ControlStats).
-
-Layers that hold when the one above fails:
-
-* a lapsed lease -- the agent hung, stalled for longer than the lease, or died -- stops
-  the car (STOP in every datagram, E_STOP kept if the last permit had it) until a fresh
-  permit comes; every tick in that state is counted (``lease_lapsed``);
-* a closed pipe (the car process is gone): STOP datagrams, then the loop exits;
-* an e-stop, once permitted, is kept in every datagram however old the permit is: only a
-  later permit without it (the operator's release) ends it.
-
-Back to the car process, through shared memory it reads when it likes (the loop never
-waits for its parent, and never blocks on a full pipe): the loop's counters, the car's
-last answer (its e-stop latch) and whether the car is stuck. At exit the loop sends its
-summary (rate, lateness) through the pipe.
-
-Where the OS grants it (root, or an RLIMIT_RTPRIO), the loop runs at real-time priority
-``control.realtime_priority`` (SCHED_FIFO): on two saturated cores a 50 Hz tick in a
-process of its own was late by 13.6 ms p99 at normal priority and by 0.09 ms under FIFO
-(an 8-car ``trustfg sim``, stop 20 of issue 13). Elsewhere it runs at normal priority and
-says so once.
+The car process spawns it through fleet.car.velocity_handle and feeds it through one
+pipe: ``("plan", plan)``, ``("permit", Permit)`` (what the operator's protocol lets the
+car do, valid until its lease, ``control.lease_s`` on ``time.monotonic()``, runs out) and
+``("quit",)``. The loop owns its own NatNet client, the car link and, at
+``control.command_rate_hz`` on absolute deadlines, the control step both simulations
+share (bridge.drive), the turn between laps and the motion watch. A lapsed lease stops the
+car (an e-stop kept) until a fresh permit comes; a closed pipe sends STOP and ends the
+loop. It reports through shared memory, so it never waits for its parent, and runs at
+SCHED_FIFO ``control.realtime_priority`` where the OS grants it (else it says so once).
+docs/design/architecture.md, "The velocity loop", tells the whole of it.
 """
 
 from __future__ import annotations

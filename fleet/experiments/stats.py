@@ -2,27 +2,14 @@
 
 A cell of an experiment's table is the runs of one (scene, attack, variant) over many
 seeds; :func:`cell` reduces them to the numbers the tables print, each with its interval:
-
-    breach_rate       seeds in which an honest car and a liar breached the clearance
-    min_clearance_m   least honest-liar clearance over all seeds (edge to edge); and its median
-    detected_3s_rate  of the seeds in which the liar told a lie (a plan false by more than
-                      plan_reject_m, a full transparency failure, within the 0.7 s the audit
-                      holds a plan to), those in which every honest car trusted it 0.2 below every
-                      honest peer within 3 s of the moment, after that first lie, at which a
-                      false claim of it first came due: the audit, seeing the truth, would find
-                      a claim still held beyond its tolerance (audit.first_false_claim), the
-                      first evidence any observer could have. A lie withdrawn with notice
-                      never comes due; a seed whose lies all were is timed from the telling
-    detected_3s_told_rate  the same, timed from the first lie told instead
-    withdrawn         seeds in which it lied but no lie came due
-    detection_s       median time from the first lie due to detection (seeds where detection
-                      never happens are left out and counted apart; "-" where it never lied
-                      beyond plan_reject_m)
-    false_positive_rate  seeds in which an honest car's trust in an honest peer fell below 0.8
-                      after the first 3 s
-    makespan_s        median time at which the last car arrived (runs where all arrived)
-
-Intervals: 2000 resamples of the seeds with a fixed generator, so a rerun prints the same.
+``breach_rate`` (seeds with an honest-liar breach), ``min_clearance_m`` (least honest-liar
+clearance, and its median), ``detected_3s_rate`` (of the seeds in which the liar lied
+beyond ``plan_reject_m``, those in which every honest car trusted it 0.2 below every honest
+peer within DETECTION_LIMIT_S of its first lie coming due; ``detected_3s_told_rate`` timed
+from the telling), ``withdrawn`` (lies that never came due), ``detection_s`` (median delay),
+``false_positive_rate`` (an honest car's trust in an honest peer below FALSE_POSITIVE_TRUST
+after the first 3 s) and ``makespan_s``. Intervals: RESAMPLES resamples of the seeds with a
+fixed generator, so a rerun prints the same. docs/design/experiments.md, "Statistics".
 """
 
 from __future__ import annotations

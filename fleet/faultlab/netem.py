@@ -1,24 +1,15 @@
 """Network impairments for the fault suite: namespaces, nftables, a delaying relay.
 
-This machine's kernel has no traffic-control qdiscs (``tc ... netem`` answers "qdisc kind
-is unknown"), so faults are made with what it has:
-
-* every car process runs in its own network namespace, joined to the root namespace by a
-  veth pair on a bridge (``10.77.X.1`` the root side, where mocap-sim and the observers
-  live; ``10.77.X.(10+N)`` car N);
-* random loss is an nftables ``numgen random`` drop rule on the car namespace's input
-  hook; a partition drops everything between one car and the other cars; a cut command
-  link drops the car's UDP commands on their way out;
-* delay is a userspace relay in the path of each Zenoh link, TCP or UDP: every chunk or
-  datagram is held for a random time (50 +- 20 ms by default) but never overtakes the one
-  before it in its direction.
-
-Everything needs root (``ip netns``, nftables); :func:`available` says whether we have it.
-A :class:`Lab` is a context manager that removes every namespace, link, rule and relay
-it made, also when a test fails. A lab whose process was killed cannot: each lab first
-writes who made it (pid and the process's start time) to ``OWNERS``, and
-:func:`sweep_stale` removes the namespaces and links of every lab whose maker is gone
-(the test session calls it as it starts; a lab does as it is entered).
+Faults are made without traffic-control qdiscs (``tc ... netem``), which not every kernel
+has: every car process runs in its own network namespace, joined to the root namespace by
+a veth pair on a bridge (``10.77.X.1`` the root side, where mocap-sim and the observers
+live; ``10.77.X.(10+N)`` car N); loss is an nftables ``numgen random`` drop on the car
+namespace's input, a partition drops everything between one car and the others, a cut
+link drops the car's commands on their way out; delay is a userspace relay in the path
+of each Zenoh link, TCP or UDP, holding every chunk or datagram for a random time without
+reordering. Everything needs root (:func:`available` says). A :class:`Lab` removes all it
+made on exit; a lab whose process was killed cannot, so each records its maker in
+``OWNERS`` and :func:`sweep_stale` removes the labs whose maker is gone.
 """
 
 from __future__ import annotations
@@ -68,9 +59,8 @@ def sh(*argv: str, stdin: str | None = None, check: bool = True) -> subprocess.C
 
 def _remove_namespace(name: str, within_s: float = 5.0) -> bool:
     """Kill what still runs in a namespace and delete it, retrying for ``within_s``; a
-    namespace that will not go is logged, never silently left. (A CI run once left four
-    behind with a single unchecked ``ip netns del``; here deletion succeeded even with
-    processes inside, so the cause is unknown and the retry is a guard, not a diagnosis.)
+    namespace that will not go is logged, never silently left (the retry guards against a
+    deletion that does not take; a single unchecked ``ip netns del`` can leave one behind).
     Whether it is gone."""
     deadline = time.monotonic() + within_s
     while True:

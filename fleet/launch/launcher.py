@@ -4,21 +4,12 @@
                 [--misinformation P]] [--clock-offset ID=S ...] [--out DIR] [--seed S] [--timeout S]
                 [--laps K] [--natnet-version V] [--mocap ARG ...]
 
-1. Resolves a fleet config for loopback: a free UDP port per car link and for NatNet
-   (unicast), a free TCP port per process for Zenoh (explicit endpoints, multicast
-   scouting off), and writes it to DIR/fleet.toml.
-2. Starts ``trustfg mocap-sim`` (simulated cars + NatNet server) and waits for READY,
-   then one ``trustfg car`` process per car, each in its own process group.
-3. Joins the bus as an observer, waits until every car is alive, and sends the start
-   message: per car a departure time (desynchronised, drawn from ``--seed``) and a
-   cruise speed -- the same distributions as the in-process simulation.
-4. Records every fleet message to DIR/messages.jsonl until every car reports it is at
-   its goal, or the timeout.
-5. Stops every process (SIGTERM, then SIGKILL after a grace period) -- also on Ctrl-C --
-   and prints and writes DIR/summary.json: the RUN keys of the experiments computed
-   from mocap-sim's ground truth (DIR/ground_truth.csv), plus ``replan_ms`` per car,
-   ``messages`` counts, ``control`` (command rate and jitter per car) and ``crashed``.
-
+It wires the scenario for loopback (free ports, fresh car-link keys) into DIR/fleet.toml;
+starts ``trustfg mocap-sim``, then one ``trustfg car`` per car (and the dashboard); joins
+the bus as the operator, waits for every car and sends the start (departures and cruise
+speeds drawn from ``--seed`` as the in-process fleet draws them); records every message
+until every car is at its goal or the timeout; stops every child (also on Ctrl-C) and
+prints and writes DIR/summary.json from mocap-sim's ground truth and the cars' own stats.
 Exit status: 0 when every car arrived with no breach and no process crashed; 1 otherwise.
 """
 

@@ -4,10 +4,9 @@ A port found by binding port 0 comes from the kernel's ephemeral range, the same
 the kernel draws from for every socket bound without a port. Between the launcher
 picking such a port for car N's Zenoh endpoint and car N binding it, car N's own NatNet
 client or car link can be given that very port, and the bus then fails with "Address in
-use" on every retry (seen in CI: a partition test whose car 1 never came up). So a port
-handed to another process is drawn from below the ephemeral range, where the kernel
-never hands out ports on its own, probed free, and never handed out twice by this
-process.
+use" on every retry, and car N never comes up. So a port handed to another process is
+drawn from below the ephemeral range, where the kernel never hands out ports on its own,
+probed free, and never handed out twice by this process.
 """
 
 from __future__ import annotations

@@ -24,8 +24,8 @@ READY_TIMEOUT_S = 30.0
 GRACE_S = 5.0
 GRACE_PER_CHILD_S = 0.25
 """Children stopped together share the cores while they wind down (a car process sends its
-STOP datagrams, collects its command loop's summary and writes its ``--stats``): sixteen
-car processes on two cores, starved, took more than 5 s, and one killed lost its stats."""
+STOP datagrams, collects its velocity loop's summary and writes its ``--stats``): sixteen
+car processes starved on two cores need more than 5 s, and one killed loses its stats."""
 
 
 def grace_s(children: int) -> float:

@@ -1,19 +1,17 @@
 """``trustfg check --config FILE``: the bring-up check of a fleet, with its motors held.
 
-It drives nothing: it listens to Motive (NatNet), PINGs every car's link (a PING is never
-applied: bridge.carlink.answer), listens to the bus and asks every car process for its
-clock. Then it prints one table, a row per configured car:
+It drives nothing: it listens to Motive, PINGs every car's link (a PING is never applied:
+bridge.carlink.answer), listens to the bus and asks every car process for its clock. Then
+it prints one table, a row per configured car:
 
-    pose     its rigid body's map pose (x, y, yaw) as the fleet sees it (the car processes'
-             mapping of Motive's axes, ``[natnet] up_axis``), and how far from its start
+    pose     its rigid body's pose on the map (x, y, yaw), and how far from its start
     link     whether the car answers on its ``link`` (round trip; its e-stop latch)
     bus      whether its car process is on the bus, its state and trial
-    clock    the offset of its computer's clock against this one (the middle of the
-             query's round trip; +- half of it), a warning above ``operator.clock_tolerance_s``
+    clock    its computer's clock against this one (+- half the query's round trip)
 
-and below it what is missing, and a warning when the scene fails ``trustfg scenario check``
-(e.g. a car parked at its goal cuts another off from its own). Exit status 0 when nothing
-is missing and nothing warned, else 1.
+and below it what is missing and what warns (a clock off by more than
+``operator.clock_tolerance_s``, a scene that fails ``trustfg scenario check``). Exit
+status 0 when nothing is missing and nothing warned, else 1.
 """
 
 from __future__ import annotations
@@ -95,13 +93,13 @@ def report(fleet: Scenario, seen: dict[int, Seen], motive: str | None, others: l
             if abs(offset) - spread > tolerance:
                 clock += " WARN"
                 out.warnings.append(f"car {car.id}: its clock is {offset * 1e3:+.0f} ms off this one's "
-                                    f"(tolerance {tolerance * 1e3:.0f} ms): check chrony (docs/lab.md)")
+                                    f"(tolerance {tolerance * 1e3:.0f} ms): check chrony (docs/lab-guide.md)")
         else:
             clock = "-"
         out.rows.append([str(car.id), str(car.body_id), pose, start, link, bus, clock])
     if others:
         out.warnings.append(f"rigid bodies {' '.join(map(str, others))} stream but belong to no car "
-                            "(streaming ids: docs/lab.md)")
+                            "(streaming ids: docs/lab-guide.md)")
     return out
 
 

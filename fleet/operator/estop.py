@@ -1,21 +1,13 @@
 """``trustfg stop --config FILE [--cars N ...]``: the emergency stop of a fleet, or of some cars.
 
 An e-stop goes two independent ways at once: E_STOP datagrams straight to each named car's
-link (no car process needed: the car latches it whatever else it hears) and a stop message
-on the bus, which every car process applies (it sends E_STOP itself and ends its trial).
-A car stays stopped until the operator releases it (``--release``: on the bus, where each
-car process then sends RELEASE in its own sequence, and straight to each version-2 link,
-where the operator's own RELEASE clears the e-stops it sent there -- a car latches per
-sender; the car then waits for a new start: a release never resumes a trial, and a named
-car still driving ends its trial).
-``--abort`` ends the running trial instead: the cars hold still (STOP, not latched) and
-wait for the next start.
-
-The first E_STOPs leave before anything heavy loads (fleet.operator.estop_first); what follows, the
-typed config and both paths, is imported after them.
-
-It prints, per car, what each path confirmed -- the car process's status on the bus, the
-car's own answer on its link -- and exits with 1 when a named car confirmed on neither.
+link (the car latches it whatever else it hears) and a stop message on the bus, which
+every car process applies. ``--release`` releases on both paths (a car latches per
+sender, so the operator's own RELEASE clears what the operator sent on the link); the car
+then waits for a new start. ``--abort`` ends the running trial instead: the cars hold
+(STOP, not latched) and wait for the next start. The first E_STOPs leave before anything
+heavy loads (fleet.operator.estop_first). It prints, per car, what each path confirmed
+and exits with 1 when a named car confirmed on neither.
 """
 
 from __future__ import annotations

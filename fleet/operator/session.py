@@ -3,21 +3,15 @@
 Every operator's session (``trustfg go``, the dashboard in operator mode, the launcher of
 ``trustfg sim``) and the one-shot ``trustfg stop`` use these pieces:
 
-* :class:`~.link_stop.LinkStopper` -- the direct path: E_STOP datagrams straight to each
-  car's ``link``, needing no car process (fleet.operator.estop_direct).
-* :class:`OperatorSession` -- the bus path and the rest: it publishes the heartbeat the
-  cars' deadman listens for, starts trials (the next trial id after every one the cars
-  report), and publishes e-stops, releases and aborts (every car process applies them,
-  agent.operator_state), next to the direct path for e-stops. It learns the cars' states from
-  the status messages its owner hands it (:meth:`OperatorSession.heard`).
+* :class:`~.estop_direct.LinkStopper` -- the direct path: E_STOP datagrams straight to
+  each car's ``link``, needing no car process (fleet.operator.estop_direct).
+* :class:`OperatorSession` -- the bus path and the rest: the heartbeat the cars' deadman
+  listens for, trials (the next id after every one the cars report), e-stops, releases and
+  aborts on the bus beside the direct path; it learns the cars' states from the status
+  messages its owner hands it (:meth:`OperatorSession.heard`).
 
-A release goes both ways too: on the bus (each car process sends RELEASE in its own
-sequence, clearing the e-stop it latched itself) and, with the direct path, straight to the
-links (the operator's RELEASE, in a new session, clearing the e-stop the operator latched
-there: a car latches per sender, bridge.carlink.receiver rule 7). A release ends this
-session's e-stop repeats first; one from another session that is still repeating its
-e-stop (``DIRECT_REPEAT_S`` after it) latches the car again: the car then stays stopped,
-its process says so, and the operator releases once more.
+A release ends this session's e-stop repeats first, then goes both ways. How releases and
+another session's repeats meet: docs/design/architecture.md, "The operator's tools".
 """
 
 from __future__ import annotations

@@ -1,20 +1,14 @@
 """The fleet in Foxglove's well-known schemas, written with the official SDK (foxglove-sdk).
 
-One :class:`FoxgloveLog` per Foxglove sink -- an MCAP file (fleet.recording.mcap_file) or the live
-WebSocket server (dashboard.foxglove_live) -- logs every fleet message twice: as itself
-(JSON with its JSON Schema, on its key expression, as recordings always carried it) and as
-what Foxglove's 3D panel draws (protobuf, Foxglove's schemas):
-
-    trustfg/F/scene        SceneUpdate: the map (walls, obstacles), every car (a disc of its
-                           radius and an arrow for its heading, at its last published pose),
-                           its plan (a line through the support states) and its goal
-    trustfg/F/N/epsilon    SceneUpdate: the safety distance car N keeps from each peer (its
-                           trust report's epsilon) as a circle around that peer
-    trustfg/F/tf           FrameTransforms: world -> carN at each pose
-    trustfg/F/log          Log: the start, and every change of a car's state
-
-Everything lies on the ground plane (z = 0) of frame ``world``, in metres. Entities have no
-lifetime: each update replaces the entity of the same id.
+One :class:`FoxgloveLog` per Foxglove sink -- an MCAP file (fleet.recording.mcap_file) or
+the live WebSocket server (dashboard.foxglove_live) -- logs every fleet message twice: as
+itself (JSON with its JSON Schema, on its key expression) and as what Foxglove's 3D panel
+draws, in Foxglove's protobuf schemas: ``trustfg/F/scene`` (SceneUpdate: the map, every
+car as a disc and an arrow at its last pose, its plan and goal), ``trustfg/F/N/epsilon``
+(SceneUpdate: the distance car N keeps from each peer, a circle around that peer),
+``trustfg/F/tf`` (FrameTransforms: world -> carN) and ``trustfg/F/log`` (Log: the start
+and every change of a car's state). Everything lies on the ground plane (z = 0) of frame
+``world``, in metres; entities have no lifetime: each update replaces the one of its id.
 """
 
 from __future__ import annotations

@@ -1,23 +1,15 @@
 """The fleet in one process: fast, deterministic per seed, with the real parts inside.
 
-Every car is a :class:`CarAgent` (the same planner and trust code the car process runs)
-driving a simulated unicycle (agent.vehicle) with the tracking controller of the
-bridge (bridge.trajectory_controller). Cars see each other through noisy pose observations and talk
-through the fleet message codec (agent.messages: msgpack bytes, decoded and filtered by
-an Inbox per receiver), over a :class:`Network` with latency, jitter and loss
-(``[sim]``). Time is simulated: a replan takes no simulated time, so a run is exactly
-repeatable from its seed. A car with ``clock_offset_s`` reads every time off its own
-clock, that much ahead of the fleet's: its observations, stamps, departure and plan
-tracking, as a car computer with a wrong clock would.
-
-The cars stand ``sim.settle_s`` at their starts before the go, as ``trustfg sim``'s do
-(standing plans published, poses seen, evidence gathered); the record of motion starts
-at the go (t = 0), the trust record with the wait.
-
-Per seed, each car draws a start delay in [0, start_delay_max_s], a cruise speed in
-cruise_speed_range_mps (:func:`draw_departures`, which ``trustfg sim`` uses too) and a
-replanning phase, so that starts are desynchronised and, with avoidance off, conflicting
-routes really collide. Physics and control step at ``control.command_rate_hz``.
+Every car is a :class:`CarAgent` (the planner and trust code the car process runs) driving
+a simulated unicycle (agent.vehicle) through the control step of bridge.drive. Cars see
+each other through noisy pose observations and talk through the fleet message codec, each
+receiver's Inbox, over a :class:`Network` with latency, jitter and loss (``[sim]``). Time
+is simulated: a replan takes none, so a run repeats exactly from its seed. A car with
+``clock_offset_s`` reads every time off its own clock, as a car computer with a wrong
+clock would. The cars stand ``sim.settle_s`` at their starts before the go, as ``trustfg
+sim``'s do; per seed each draws a start delay, a cruise speed (:func:`draw_departures`,
+which ``trustfg sim`` uses too) and a replanning phase. docs/design/experiments.md, "The
+in-process fleet".
 """
 
 from __future__ import annotations
@@ -53,7 +45,7 @@ def simulate(scenario: Scenario, seed: int, sdf: SignedDistanceField | None = No
              keep_plans: bool = False, record_trust: bool = True) -> RunRecord:
     """Run the scenario to completion (every car at its goal) or to sim.timeout_s.
     ``record_trust=False`` leaves the trust matrices over time out of the record (they
-    cost O(n^2) trust fusions every RECORD_TRUST_PERIOD_S: a third of a 16-car run)."""
+    cost O(n^2) trust fusions every RECORD_TRUST_PERIOD_S, much of a large fleet's run)."""
     fleet = _Fleet(scenario, seed, sdf, keep_plans, record_trust)
     for k in range(-fleet.settle_steps, fleet.steps):
         if fleet.step(k):
@@ -254,7 +246,7 @@ class Network:
     probability ``sim.message_loss`` and otherwise arrives ``message_latency_s`` plus
     U(0, ``message_jitter_s``) after it was sent, in the order it was sent on each
     sender-receiver link (as over one Zenoh session's reliable link). Draws come from
-    their own generator, so a run without faults is the same run it always was."""
+    their own generator, so the faults change nothing else a run draws."""
 
     def __init__(self, sim: SimConfig, n: int, rng: np.random.Generator):
         self.sim, self.n, self.rng = sim, n, rng

@@ -1,44 +1,17 @@
 """ORCA, the baseline a user would pick instead, driving the same simulated cars.
 
 ORCA (van den Berg et al., "Reciprocal n-body collision avoidance", ISRR 2009) through
-pyrvo, Python bindings of the RVO2 library. It gets what our cars never have: every car's
-true position and velocity at every step (perfect state), and needs no messages. Its cars
-are the in-process fleet's: the same unicycle model with the same limits (agent.vehicle),
-stepped at ``control.command_rate_hz``, with the same start delays and cruise speeds
-(fleet_sim.draw_departures, from the same seed).
+pyrvo, bindings of the RVO2 library, with perfect state (every car's true position and
+velocity) and no messages; its cars are the in-process fleet's unicycles with the same
+limits, departures and cruise speeds (fleet.sim.in_process.draw_departures). Each step a
+car's preferred velocity points at its next via point (slowing into the goal, with RVO2's
+seeded 1e-4 m/s perturbation); ORCA steers the point P = p + L h ahead of the car (L its
+radius; a unicycle can move P in any direction), and its velocity u for P becomes
 
-Every step, per car:
+    v = max(0, u . h),    omega = (u . h_perp) / L
 
-1. preferred velocity: towards its next via point (the scene's route, or where a car has
-   none and the straight line is blocked, one from agent.routes; then the goal) at
-   its cruise speed, slowing as v = min(cruise, |goal - p| / GOAL_SLOWDOWN_S) into the
-   goal, zero before its departure and once it has arrived; plus RVO2's customary
-   perturbation of 1e-4 m/s in a seeded random direction (it breaks exact symmetries).
-   The car moves on to the next via point when it is within VIA_REACHED_M of it or can
-   see the one after (RVO2's visibility query against the obstacles);
-2. ORCA steers a point ahead of each car, P = p + L h (h = (cos yaw, sin yaw), L = the
-   car's radius: the middle of its front edge), which a unicycle can move in any
-   direction (feedback linearisation of the unicycle about an offset point): RVO2 is told
-   every P and its true velocity v h + L omega h_perp, and computes each car's new
-   holonomic velocity u for P;
-3. u becomes the unicycle command that gives P that velocity:
-
-       v = max(0, u . h),    omega = (u . h_perp) / L
-
-   clamped by the vehicle's limits (which also limit its acceleration).
-
-The agent radius is max(eps_0 / 2, L + r + clearance / 2) (SafetyConfig): a car's body
-lies within L + r of its P, so two agents kept apart give two cars the required clearance,
-and eps_0 is the distance our planner keeps from a trusted peer. Obstacles and walls (a
-clockwise boundary polygon) are kept the same radius from P. The preferred velocity aims
-P at the via point, and at goal + L h on the last stretch, so the car's centre stops at
-its goal.
-
-ORCA's guarantee holds for agents that take u at once; a car's limits (no reversing,
-turn rate, acceleration) mean that what the fleet executes is not exactly what ORCA chose.
-That is the honest comparison: the same cars, ORCA's decisions. (Steering the centre
-itself, v = |u| cos(e) and omega = k e for the heading error e, deadlocked in more than half
-of the runs: a unicycle cannot take the sideways velocities ORCA uses to slip past.)
+clamped by the vehicle's limits. The agent radius, max(eps_0 / 2, L + r + clearance / 2),
+keeps two cars the required clearance apart. docs/design/experiments.md, "ORCA".
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 
 The in-process fleet (fleet.sim.in_process) returns a :class:`RunRecord`; ``trustfg sim``
 builds one from mocap-sim's ground truth, ``trustfg report`` from a recording. All three
-summarise it with :func:`motion_summary` (the RUN keys documented in the README), so a
+summarise it with :func:`motion_summary` (the RUN keys of docs/user-guide.md), so a
 breach, an arrival or a makespan means the same everywhere.
 """
 

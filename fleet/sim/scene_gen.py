@@ -3,30 +3,15 @@
     trustfg scenario generate --kind KIND --cars N --seed S [--name NAME] --out FILE
     trustfg scenario check FILE|NAME [...]
 
-Kinds (every size follows the cars' radii through SafetyConfig: eps_0 between cars,
-eps_obs from walls; r = 0.1 m gives 0.45 m and 0.25 m):
-
-* ``circle``: N cars on a ring swap to its antipodal points (the classic hard case: every
-  route crosses every other in the middle); the seed turns the ring.
-* ``circle-obstacles``: the same on a wider ring, with 1-3 convex pillars drawn by the seed
-  in the middle (gaps between pillars let a car through).
-* ``corridor``: two rooms joined by a corridor wide enough for two cars to pass (width and
-  length drawn by the seed); half the cars go each way.
-* ``bottleneck``: two rooms joined by a door in a wall, too narrow for two cars abreast (a
-  car must wait for the other side); half the cars go each way.
-* ``t-junction``: three roads meet; each car drives from one road's end to another's.
-* ``warehouse``: a grid of aisles between shelf racks; every car goes from a spot in one
-  aisle to a spot in another, around the racks.
-* ``random-field``: a square room with 4-7 random convex obstacles (every gap between
-  them, and to the walls, lets a car through) and random starts and goals.
-
-Every car gets a route (via points, agent.routes) where the straight line would not keep
-its comfort from obstacles. Every scene is checked (:func:`check_scene`): a start or goal
-closer than eps_obs to an obstacle or wall, or closer than eps_0 to another car's start
-(goal), or in which a car is cut off from its goal once the others stand at theirs
-(:func:`cut_off_by_parked`: a deadlock no planner resolves), is refused with one line and
-exit status 2; the generator draws again from the seed's stream until a layout passes. A
-scene's ``sim.timeout_s`` is set from its longest route, so a stuck run ends soon.
+Kinds (:data:`KINDS`): ``circle``, ``circle-obstacles``, ``corridor``, ``bottleneck``,
+``t-junction``, ``warehouse``, ``random-field``; every size follows the cars' radii
+through SafetyConfig (eps_0 between cars, eps_obs from walls). Every car gets a route where
+the straight line would not keep its comfort from obstacles. :func:`check_scene` refuses a
+start or goal too close to an obstacle, a wall or another car's, and a scene in which a car
+is cut off from its goal once the others stand at theirs (:func:`cut_off_by_parked`); the
+generator draws again from the seed's stream until a layout passes. A scene's
+``sim.timeout_s`` follows its longest route. docs/design/experiments.md, "Scenes from a
+seed".
 """
 
 from __future__ import annotations

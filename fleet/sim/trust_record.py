@@ -23,9 +23,9 @@ TRUST_GAP = 0.2
 """A liar is detected when every honest car trusts it this much less than every honest peer."""
 LIE_SUSTAINED_S = 1.0
 """A lie is sustained once it has kept coming due for this long (agent.audit.sustained_lie):
-told for 0.6 s before the go and then not until the liar set off 0.7 s later, a lie put
-the liar 0.14 below honest peers in honest cars' trust, and the gap closed to 0.11 before
-the next lie (``trustfg sim`` of lab with a liar, seed 12, four CPU hogs beside it)."""
+a shorter one, such as a liar's lie about its departure told while it still stands, can
+leave it less than TRUST_GAP below honest peers, and forgetting closes the gap before the
+next lie. Detection is timed from a sustained lie."""
 
 
 def trust_over_time(scenario: Scenario, log: list[tuple[float, int, int, float]], t_go: float) -> dict:

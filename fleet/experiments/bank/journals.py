@@ -4,15 +4,13 @@
                                      [--scenes NAME ...] [--seed S] [--seeds K] [--out DIR] [--no-figures]
 
 ``trustfg experiment bank --report-only`` reports the runs of one journal whose
-configuration is the one this commit would run (fleet.sim.run_record.fingerprint). The README's
-table puts runs of several commits next to each other: the pipeline as shipped, from the
-journal it was run into, and the baselines, from the journal of the commit they ran on.
-This command reports such journal entries as they stand, naming each run's commit: from
-every FILE the entries of the METHODs named (all of its methods without ``:``), for the
-bank scenes of ``--scenes`` and the seeds ``--seed`` .. ``--seed + --seeds - 1``, and
-every fresh (held-out) scene's entries. Nothing is run. A run found in two journals
-(group, scene, method, seed) is counted once when both entries record the same run
-(fleet.experiments.bank.recheck.FIELDS) and refused when they do not.
+configuration this commit would run (fleet.sim.run_record.fingerprint). This command
+reports journal entries as they stand, naming each run's commit, so that runs of several
+commits stand side by side (the shipped pipeline from its journal, the baselines from
+theirs): from every FILE the entries of the METHODs named (all without ``:``), for the
+bank scenes of ``--scenes`` and seeds ``--seed`` .. ``--seed + --seeds - 1``, and every
+fresh scene's entries. Nothing is run. A run found in two journals is counted once when
+both entries record the same run (fleet.experiments.bank.recheck.FIELDS), else refused.
 """
 
 from __future__ import annotations

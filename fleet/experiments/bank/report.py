@@ -1,21 +1,13 @@
 """What the scenario bank measured, as numbers with confidence intervals, a table and a figure.
 
-Per scene and method (and pooled over the bank's scenes, and over the fresh scenes):
-
-    rate of each outcome (success, breach, contact, deadlock, timeout)    over all runs
-    least clearance between two cars' edges, per run: min, 5th percentile, median
-    least clearance of a car's edge from obstacles and walls: min, median
-    makespan (last arrival) and flowtime (sum of arrival times, s from the start; the
-    start delays are the same for every method)                         over successful runs
-    replan time: the median of each run's median (ORCA: one RVO2 step for the whole fleet
-    divided by the number of cars)
-    how the replans ended (agent.safe_plan: verified first try, on a retry, braking
-    fallback) and the deadlocks the cars detected (agent.deadlock), summed over the runs
-
-95 % confidence intervals are percentile bootstraps (BOOTSTRAP_RESAMPLES resamples of the
-runs, numpy, seeded per cell, so a report is reproducible). With no event in n runs the
-bootstrap interval of a rate is [0, 0]; the table then gives the rule-of-three 95 % upper
-bound 3/n instead.
+Per scene and method, pooled over the bank's scenes and over the fresh scenes: the rate
+of each outcome (success, breach, contact, deadlock, timeout); the least clearance between
+two cars' edges per run (min, 5th percentile, median) and from obstacles and walls (min,
+median); makespan and flowtime over successful runs; replan time (the median of each run's
+median; ORCA: one RVO2 step for the fleet over the number of cars); how the replans ended
+and the deadlocks the cars detected, summed. 95 % intervals are percentile bootstraps
+(BOOTSTRAP_RESAMPLES resamples of the runs, seeded per cell, so a report repeats); with no
+event in n runs the table gives the rule-of-three upper bound 3/n instead of [0, 0].
 """
 
 from __future__ import annotations
