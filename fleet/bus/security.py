@@ -1,29 +1,15 @@
 """The fleet bus secured with Zenoh's own features: mutual TLS and access control.
 
-Every process holds a certificate from the fleet's CA (deploy/tls/make-certs.sh; its
-common name is ``carN`` for car N, ``operator`` for trustfg go / dashboard / record). With
-mutual TLS a session without a certificate from that CA cannot connect at all: it can
-neither receive nor publish.
-
-Access control (Zenoh's ``access_control`` block, default deny) is enforced by every
-receiving process on what arrives from each authenticated peer (ingress), so that:
-
-* car N may put, and declare liveliness tokens and the queryables of its advanced
-  publishers, only under ``trustfg/F/N/**`` -- a car cannot speak for another: what car 2
-  publishes on car 1's keys reaches nobody;
-* only the operator may put its messages: the start, the stop (e-stop, release, abort)
-  and its heartbeat (``trustfg/F/start``, ``trustfg/F/stop``, ``trustfg/F/heartbeat``);
-* everyone may subscribe and query (read) anything of the fleet.
-
-What a process sends is not restricted here (egress is allowed): each receiver guards
-itself.
-
     trustfg secure-config --fleet F --cars 1 2 3 4 --certs DIR --identity car1 --out car1.json5
 
-writes the JSON5 to name in ``[bus] zenoh_config`` (endpoints must then be ``tls/...``).
-It checks that DIR holds the identity's files and writes the paths where they will be on
-the machine that uses them (``--certs-at``, default /etc/trustfg/tls: docs/lab.md); the
-identity must be ``operator`` or ``carN`` for a car N of ``--cars``.
+writes the JSON5 to name in ``[bus] zenoh_config`` (endpoints must then be ``tls/...``) for
+one identity (a certificate's common name: ``carN`` for car N, ``operator`` for go,
+dashboard and record). Without a certificate of the fleet's CA a session cannot connect
+at all. Access control, default deny, is enforced by every receiver on what each
+authenticated peer sends: car N may put only under ``trustfg/F/N/**``, only the operator
+may put the start, the stop and the heartbeat, and everyone may read. It checks that DIR
+holds the identity's files and writes the paths where they will be on the machine that
+uses them (``--certs-at``: docs/lab-guide.md).
 """
 
 from __future__ import annotations
@@ -42,7 +28,7 @@ WRITE = ["put", "delete", "declare_queryable", "reply"]
 
 
 CERTS_AT = "/etc/trustfg/tls"
-"""Where docs/lab.md installs each machine's certificates."""
+"""Where docs/lab-guide.md installs each machine's certificates."""
 
 
 def identities(cars: list[int]) -> list[str]:

@@ -2,21 +2,13 @@
 
 The operator's tools send as the operator's source (``SOURCE_OPERATOR``), with the car's
 key on an authenticated (version 2) link. A car latches an E_STOP whatever its sequence
-number or session (bridge.carlink.receiver, rule 2), so the operator's datagrams work next
-to a car process's own stream -- or without one, or with one that is hung or never heard
-the stop. :class:`LinkStopper` repeats the E_STOP for ``repeat_s`` (Wi-Fi loses
-datagrams) and PINGs, and reads the cars' answers, which tell whether the latch took. The
-answers only inform: the E_STOPs go out whatever they say.
-
-A car latches per source and only that source's in-session RELEASE clears its latch
-(rule 7), so a release goes this way too (:meth:`LinkStopper.release`), in a new session
-of its own: another tool of the operator's may have sent since. On a version-1 link the
-operator sends nothing but E_STOP and PING (an ordinary datagram out of the car process's
-sequence would break it: rule 5); there the car process's RELEASE clears the latch.
-
-This module imports nothing heavy (no Zenoh, no numpy, not even the typed config); still,
-``trustfg stop`` sends its first E_STOPs before it loads (fleet.operator.estop_first), and this
-path repeats them.
+number or session (bridge.carlink.receiver, rule 2), so these datagrams work beside a car
+process's own stream, without one, or with one that is hung. :class:`LinkStopper` repeats
+the E_STOP for ``repeat_s`` (Wi-Fi loses datagrams), PINGs, and reads the answers, which
+only inform. A car latches per source and only that source's in-session RELEASE clears
+it (rule 7), so a release goes this way too, in a new session of its own. On a version-1
+link the operator sends only E_STOP and PING (rule 5); the car process releases there.
+This module imports nothing heavy: no Zenoh, no numpy, not even the typed config.
 """
 
 from __future__ import annotations
