@@ -6,17 +6,11 @@
                                    [--jobs J] [--out DIR]
 
 Per scene, attack (car 1 lies; ``collude``: cars 1 and 3) and seed, the in-process fleet
-runs three ways (and the honest fleet under loss, delay and a skewed clock with trust on,
-``honest-lossy-clock``: what trust costs honest cars):
-
-    on     trust on: every factor, plan rejection, the audit, epsilon from trust
-    off    the paper's baseline: trust gathered but not used, every plan believed, eps_0
-    wide   a uniformly careful fleet: every plan believed, every peer at eps_0 * g_max
-
-and each cell (scene, attack, variant) is summarised by fleet.experiments.stats.cell with 95 %
-bootstrap intervals: honest-liar breaches, least clearance, detection time, false
-positives, makespan. Held-out scenes (not looked at while the defences were built) run
-``on`` only and are reported apart. Writes DIR/adversaries/metrics.json and table.md.
+runs ``on`` (trust on), ``off`` (the paper's baseline: every plan believed, eps_0) and
+``wide`` (every plan believed, every peer at eps_0 * g_max), and the honest fleet under
+loss, delay and a skewed clock (``honest-lossy-clock``). Each cell is summarised by
+fleet.experiments.stats.cell with 95 % bootstrap intervals; held-out scenes run ``on``
+only, reported apart. Writes DIR/adversaries/metrics.json and table.md.
 """
 
 from __future__ import annotations
@@ -76,8 +70,9 @@ HONEST = {"honest-lossy-clock": lossy_clock}
 
 PLAN_LIES = ("displaced", "forged-future", "forged-past", "false-future", "false-yield", "on-off", "replay",
              "collude")
-"""Attacks whose false claims exceed the transparency tolerance somewhere in the plan (the
-acceptance's "detected within 3 s"); the others are bounded otherwise (README)."""
+"""Attacks whose false claims exceed the transparency tolerance somewhere in the plan: they
+must be detected within 3 s; the others are bounded otherwise (docs/design/trust.md, "The
+attack suite")."""
 
 
 VARIANTS = {"on": trust_on, "off": trust_off, "wide": uniform_wide}

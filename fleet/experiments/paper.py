@@ -2,20 +2,14 @@
 
     trustfg experiment {proximity,consistency,transparency,lab,pipeline,all} [--seed N] [--seeds K]
                        [--out DIR] [--jobs J]
-    trustfg experiment adversaries ...         (fleet.experiments.adversaries: every attack, three fleets)
-    trustfg experiment transparency-sweep ...  (fleet.experiments.transparency_sweep: misinformation x g_max)
-    trustfg experiment bank ...                (fleet.experiments.bank.runner: the scenario bank and its baselines)
-    trustfg experiment bank-journals ...       (fleet.experiments.bank.journals: a table of journals of several commits)
+    trustfg experiment adversaries | transparency-sweep | bank | bank-journals ...
 
-writes DIR/<name>/metrics.json and PNG figures and prints a table. metrics.json is
-
-    {"experiment": NAME, "scenario": FILE, "seeds": [...],
-     "variants": {"on": [RUN, ...], "off": [RUN, ...]}, "summary": {...}}
-
-with one RUN per seed (keys documented in the README). The lab experiment has a third
-variant "A" (everyone honest); its "on"/"off" are the paper's scenario B (car 1 at 40 %
-misinformation) with trust on and with the paper's baseline ("off": no transparency factor
-and every plan believed, :func:`trust_off`).
+The last four are studies with options of their own (:data:`STUDIES`). An experiment
+writes DIR/<name>/metrics.json and PNG figures and prints a table; metrics.json holds the
+experiment, its scenario and seeds, one RUN per seed and variant (``"on"``, ``"off"`` and
+the others of :data:`EXPERIMENTS`; the lab's ``"A"`` is everyone honest) and a summary.
+The RUN keys are listed in docs/user-guide.md, "metrics.json"; how the variants are
+built, in docs/design/experiments.md, "The paper's experiments".
 """
 
 from __future__ import annotations
@@ -179,7 +173,7 @@ def _truth(record: RunRecord, car: int):
 
 
 def run_one(scenario: Scenario, seed: int) -> tuple[dict, RunRecord]:
-    """Simulate one seed and summarise it as a RUN dict (see the README)."""
+    """Simulate one seed and summarise it as a RUN dict (docs/user-guide.md, "metrics.json")."""
     record = simulate(scenario, seed, sdf=_sdf(scenario.world))
     return summarise(scenario, record), record
 

@@ -4,19 +4,13 @@ fleet that is simply careful with everyone.
     trustfg experiment transparency-sweep [--seeds 30] [--seed 0] [--scene lab]
         [--misinformation 0.05 0.1 0.2 0.4 0.6 0.8] [--gains 1.5 2 3] [--jobs J] [--out DIR]
 
-The paper's transparency experiment read one point (40 % misinformation, g_max = 2) with
-an "off" that still refused every lie (lies of 0.4-0.8 m miss by more than the 0.3 m
-rejection threshold), so its distance ratio was g_max read back. Here car 1 is the
-paper's liar (``displaced+false-testimony``) at every misinformation level p, and the
-fleet is one of
-
-    on@g    trust on, g_max = g (plans checked, rejected, audited; epsilon from trust)
-    wide@g  no trust, every plan believed, every peer at eps_0 * g (uniformly careful)
-    off     the paper's baseline: no trust, every plan believed, eps_0 for everyone
-
-Per cell: seeds with an honest-liar breach, least honest-liar clearance, median least
-distance of honest cars to the liar, false positives and makespan, with 95 % bootstrap
-intervals (fleet.experiments.stats). Writes DIR/transparency-sweep/metrics.json and table.md.
+Car 1 is the paper's liar (``displaced+false-testimony``) at every misinformation level p,
+against each fleet: ``on@g`` (trust on, g_max = g), ``wide@g`` (no trust, every plan
+believed, every peer at eps_0 * g) and ``off`` (the paper's baseline). Per cell: seeds with
+an honest-liar breach, least honest-liar clearance, median least distance of honest cars
+to the liar, false positives and makespan, with 95 % bootstrap intervals
+(fleet.experiments.stats). Writes DIR/transparency-sweep/metrics.json and table.md. Why
+the sweep: docs/design/experiments.md, "The attack suite and the transparency sweep".
 """
 
 from __future__ import annotations

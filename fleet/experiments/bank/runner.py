@@ -4,34 +4,14 @@
                             [--fresh K] [--set SECTION.KEY=VALUE ...] [--jobs J] [--out DIR]
                             [--report-only | --recheck K]
 
-Per scene and method, every seed is one in-process run (fleet.sim.in_process, or
-fleet.sim.orca for ORCA) with the same start delays and cruise speeds for every method
-(fleet_sim.draw_departures from the seed). Methods:
-
-* ``full``: the whole pipeline as shipped: every trust factor, and the car pipeline's
-  plan verification with its retries and braking fallback, the proximity guard and the
-  deadlock watch (fleet.sim.in_process runs them as the car process does; ``--set
-  verify.enabled=false`` and the like switch them off);
-* ``fixed``: no trust factors (no consistency factor, no transparency scaling) and every
-  plan believed (trust.reject_plans = false): the proximity hinge at eps_0 from every
-  peer; the rest of the pipeline as in ``full``;
-* ``wide``: the same with 2 eps_0 from every peer (trust.epsilon_gain_fixed = 2);
-* ``orca``: ORCA (pyrvo) driving the same cars with perfect state and no messages.
-
-A run's outcome, judged on the executed motion (fleet.sim.run_record.motion_summary): ``breach``
-(two cars closer than the required clearance), else ``contact`` (a car's edge touched an
-obstacle or wall), else ``deadlock`` (a car not at its goal at the timeout, and none of the
-cars still out moved more than DEADLOCK_MOVE_M in the last DEADLOCK_WINDOW_S), else
-``timeout`` (still moving), else ``success`` (every car at its goal). Rates, medians and
-their 95 % bootstrap confidence intervals are in fleet.experiments.bank.report.
-
-``--fresh K`` adds K random-field scenes made from generator seeds drawn from the
-operating system's entropy at the start of the run (printed and saved in OUT/fresh/, so
-the row can be re-run): scenes nobody tuned on, reported apart from the bank.
-``--recheck K`` reruns K of the journal's runs and says which repeat to the last digit (a
-run repeats only in the environment it was made in: fleet.experiments.run_environment).
-``--set`` changes a config value of every scene for every method, e.g. to switch a part
-of the pipeline off for an ablation (``--set planner.interp_checks=8``).
+Per scene, method and seed, one in-process run, with the same departures for every method:
+``full`` (the pipeline as shipped), ``fixed`` (no trust factors, every plan believed, eps_0
+from every peer), ``wide`` (the same at 2 eps_0) and ``orca`` (fleet.sim.orca). A run is
+judged on its executed motion: ``breach``, else ``contact``, else ``deadlock`` (no car
+still out moved DEADLOCK_MOVE_M in the last DEADLOCK_WINDOW_S), else ``timeout``, else
+``success``. Each run goes to the journal as it ends, so a stopped bank carries on;
+``--fresh K`` adds random fields nobody tuned on, ``--recheck K`` reruns K journal entries,
+``--set`` changes a config value. docs/design/experiments.md, "The scenario bank".
 """
 
 from __future__ import annotations
@@ -290,7 +270,7 @@ def recheck(scenes: dict[str, tuple[dict, str]], methods: list[str], seeds: dict
 def code_version() -> str:
     """The commit this package runs from (``git describe --always --dirty``: ``-dirty``
     when the tree has changes), else the installed version: what a journal entry was
-    run on, so runs of several sittings and commits can be told apart."""
+    run on, so runs of several commits can be told apart."""
     here = Path(__file__).resolve().parent
     try:
         done = subprocess.run(["git", "-C", str(here), "describe", "--always", "--dirty", "--abbrev=7"],
