@@ -5,11 +5,10 @@ The experiments and the bank run many in-process runs, each a pure function of i
 ``ordered=False``) from ``jobs`` worker processes -- in this process when ``jobs`` <= 1,
 easier to debug and profile. The workers ignore SIGINT, so Ctrl-C in a terminal reaches
 this process alone; it terminates the workers at once (the runs under way are lost, the
-finished ones are the caller's) and raises KeyboardInterrupt. With a process pool that
-waits for its queue on exit, Ctrl-C used to leave a long bank running to its end.
-SIGTERM (``kill``, a job scheduler's stop) unwinds the same way while the workers run:
-it killed this process alone, and each worker, finishing its run, died on a broken pipe
-with a traceback.
+finished ones are the caller's) and raises KeyboardInterrupt, rather than wait, as a
+process pool does on exit, for its whole queue. SIGTERM (``kill``, a job scheduler's
+stop) unwinds the same way while the workers run, so no worker is left to finish its run
+and die on a broken pipe.
 """
 
 from __future__ import annotations
