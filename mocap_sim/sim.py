@@ -13,10 +13,12 @@ from __future__ import annotations
 
 import argparse
 import csv
+import dataclasses
 import json
 import logging
 import math
 import socket
+import sys
 import threading
 import time
 from dataclasses import dataclass
@@ -29,9 +31,11 @@ from ..agent.scenario_files import load_scenario
 from ..agent.vehicle import VehicleState, step
 from ..bridge import natnet
 from ..bridge.carlink import CommandReceiver, link_key
+from ..bridge.natnet_client import NatNetConnectionError
 from ..fleet.car.ticker import ticks
 from ..fleet.program import command_parser, configured, stop_on_signals
 from .natnet_server import NatNetServer, NatNetServerOptions, Occlusion
+from .relay import RelayOptions, check_relay, relayed, served_version
 
 log = logging.getLogger(__name__)
 
@@ -67,6 +71,11 @@ Fault knobs (all times in seconds since the simulator started):
                          start, standing (the lab's "carry them back" between trials);
                          anything else is refused and counted
 
+Mixed fleets: cars marked ``simulated = false`` are real. With ``--relay LAB.toml``
+mocap-sim binds no link for them and streams their rigid bodies, as the motion capture that
+config's [natnet] names streams them, beside its simulated cars (docs/lab-guide.md,
+"Bringing up the first real car").
+
 The simulated cars answer PING datagrams as firmware must. The process prints the ports
 it bound (NatNet, every car's link, the control port), then ``READY`` on stdout once the
 stream runs, and stops cleanly on SIGTERM or SIGINT."""
@@ -98,7 +107,9 @@ def parse_window(text: str) -> Window:
 
 @dataclass(frozen=True)
 class MocapSimOptions:
-    natnet_version: str = natnet.DEFAULT_STREAM_VERSION
+    natnet_version: str = ""
+    """NatNet version of SERVERINFO and the frames, e.g. "3.1"; empty: the upstream's when
+    relaying (mocap_sim.relay.served_version), else natnet.DEFAULT_STREAM_VERSION."""
     rate_hz: float = 120.0
     physics_hz: float = 200.0
     drop_rate: float = 0.0
@@ -111,22 +122,27 @@ class MocapSimOptions:
     ground_truth: Path | None = None
     control_port: int | None = None
     command_log: Path | None = None
+    relay: RelayOptions | None = None
+    """Where a mixed fleet's real cars are tracked (mocap_sim.relay); None: every car is simulated."""
 
 
 class MocapSim:
     def __init__(self, scenario: Scenario, options: MocapSimOptions, clock=time.time):
-        missing = [car.id for car in scenario.cars if not car.link]
+        check_relay(scenario, options.relay)
+        self.cars = tuple(car for car in scenario.cars if car.simulated)
+        """The cars simulated here; a mixed fleet's real cars are relayed (mocap_sim.relay)."""
+        missing = [car.id for car in self.cars if not car.link]
         if missing:
-            raise ConfigError(f"cars {missing}: mocap-sim needs every car's link address")
+            raise ConfigError(f"cars {missing}: mocap-sim needs every simulated car's link address")
         self.scenario = scenario
         self.options = options
         self.clock = clock
-        self._keys = {car.id: link_key(car) for car in scenario.cars}  # version 2 cars check MACs
+        self._keys = {car.id: link_key(car) for car in self.cars}  # version 2 cars check MACs
         self.stop = threading.Event()
         self._lock = threading.Lock()
-        self.states = {car.id: VehicleState(car.start[0], car.start[1], car.start_heading) for car in scenario.cars}
-        self.commands = {car.id: (0.0, 0.0) for car in scenario.cars}
-        self._bodies = {car.id: car.body_id for car in scenario.cars}
+        self.states = {car.id: VehicleState(car.start[0], car.start[1], car.start_heading) for car in self.cars}
+        self.commands = {car.id: (0.0, 0.0) for car in self.cars}
+        self._bodies = {car.id: car.body_id for car in self.cars}
         self._rng = np.random.default_rng([options.seed, 1])
         self._t0 = time.monotonic()
         self.hidden_until: dict[int, float] = {}
@@ -144,10 +160,15 @@ class MocapSim:
             body = self._bodies[car_id]
             yield body, f"car{car_id}", position, orientation, now >= self.hidden_until.get(body, 0.0)
 
-    def server_options(self) -> NatNetServerOptions:
+    def server_options(self, upstream: natnet.Version | None = None) -> NatNetServerOptions:
+        """The NatNet server's options; ``upstream``: the relayed stream's NatNet version."""
         n, o = self.scenario.natnet, self.options
+        if o.natnet_version:
+            version = natnet.Version.parse(o.natnet_version)
+        else:
+            version = served_version(upstream) if upstream is not None else natnet.DEFAULT_VERSION
         return NatNetServerOptions(
-            natnet_version=natnet.Version(*map(int, o.natnet_version.split("."))), rate_hz=o.rate_hz,
+            natnet_version=version, rate_hz=o.rate_hz,
             address=n.server, command_port=n.command_port, multicast=n.mode == "multicast",
             multicast_group=n.multicast_group, data_port=n.data_port, drop_rate=o.drop_rate,
             noise_std_m=o.noise_m, latency_s=o.latency_s, seed=o.seed,
@@ -157,18 +178,23 @@ class MocapSim:
     def run(self, ready=lambda: print("READY", flush=True)) -> int:
         receivers = {}
         try:
-            for car in self.scenario.cars:
+            for car in self.cars:
                 host, port = parse_udp_address(car.link, f"cars[id={car.id}].link")
                 receivers[car.id] = CommandReceiver(car.id, (host, port), key=self._keys[car.id])
                 receivers[car.id].start()
             if self.options.control_port is not None:
                 threading.Thread(target=self._control, name="mocap-control", daemon=True).start()
-            with NatNetServer(self.server_options(), self.bodies) as server, self._ground_truth() as writer, \
-                    _CommandLog(self.options.command_log) as command_log:
-                log.info("mocap-sim: %d cars, NatNet %s %s on %s:%d", len(receivers), self.options.natnet_version,
+            with relayed(self.scenario, self.options.relay, self.bodies) as (source, upstream), \
+                    NatNetServer(self.server_options(upstream), source) as server, \
+                    self._ground_truth() as writer, _CommandLog(self.options.command_log) as command_log:
+                log.info("mocap-sim: %d cars, NatNet %s %s on %s:%d", len(receivers), server.options.natnet_version,
                          self.scenario.natnet.mode, *server.command_address)
                 links = " ".join(f"{car}=udp://{r.address[0]}:{r.address[1]}" for car, r in receivers.items())
                 control = f", control port {self.options.control_port}" if self.options.control_port else ""
+                if self.options.relay is not None:
+                    up = self.options.relay.upstream
+                    control += (f", relaying cars {[c.id for c in self.scenario.cars if not c.simulated]} "
+                                f"from {up.server}:{up.command_port}")
                 print(f"mocap-sim: NatNet on {server.command_address[0]}:{server.command_address[1]}, "
                       f"car links {links}{control}", flush=True)
                 ready()
@@ -215,7 +241,7 @@ class MocapSim:
         """Every car back at its start, standing."""
         with self._lock:
             self.states = {car.id: VehicleState(car.start[0], car.start[1], car.start_heading)
-                           for car in self.scenario.cars}
+                           for car in self.cars}
         log.info("mocap-sim: every car back at its start")
 
     def _ground_truth(self) -> "_CsvWriter":
@@ -293,8 +319,9 @@ def main(argv: list[str] | None = None) -> int:
     parser = command_parser("trustfg mocap-sim", DESCRIPTION, whole=True,
                             epilog="Times of --occlude and --cut-link are seconds since the simulator started.")
     parser.add_argument("--config", required=True, type=Path, help="fleet config TOML (cars need link addresses)")
-    parser.add_argument("--natnet-version", choices=natnet.STREAM_VERSIONS, default=natnet.DEFAULT_STREAM_VERSION,
-                        help="NatNet version of SERVERINFO and the frames (default %(default)s)")
+    parser.add_argument("--natnet-version", choices=natnet.STREAM_VERSIONS, default="",
+                        help="NatNet version of SERVERINFO and the frames (default: the upstream's with --relay, "
+                             f"else {natnet.DEFAULT_STREAM_VERSION})")
     parser.add_argument("--rate", type=float, default=120.0, help="NatNet frame rate, Hz (default 120)")
     parser.add_argument("--physics-hz", type=float, default=200.0, help="physics rate, Hz (default 200)")
     parser.add_argument("--drop-rate", type=float, default=0.0, help="probability of dropping a frame (0..1)")
@@ -311,6 +338,12 @@ def main(argv: list[str] | None = None) -> int:
                         help="write every change of a car's command between zero and non-zero here (CSV)")
     parser.add_argument("--control-port", type=int, default=None,
                         help="UDP port for run-time faults (JSON; see the description above)")
+    parser.add_argument("--relay", type=Path, default=None, metavar="LAB.toml",
+                        help="relay the real cars (simulated = false) from the motion capture this config's "
+                             "[natnet] names")
+    parser.add_argument("--relay-stale", type=float, default=RelayOptions.stale_s, metavar="S",
+                        help="serve a real car untracked once its newest upstream pose is this old, s "
+                             "(default %(default)s)")
     args = parser.parse_args(argv)
     if not 0.0 <= args.drop_rate <= 1.0:
         parser.error("--drop-rate must be within [0, 1]")
@@ -320,12 +353,23 @@ def main(argv: list[str] | None = None) -> int:
     for name in ("noise", "latency", "slip"):
         if not getattr(args, name) >= 0:
             parser.error(f"--{name} must be >= 0")
+    if not args.relay_stale > 0:
+        parser.error("--relay-stale must be > 0")
     options = MocapSimOptions(
         natnet_version=args.natnet_version, rate_hz=args.rate, physics_hz=args.physics_hz,
         drop_rate=args.drop_rate, noise_m=args.noise, latency_s=args.latency,
         occlusions=tuple(args.occlude), link_cuts=tuple(args.cut_link), slip=args.slip,
         seed=args.seed, ground_truth=args.ground_truth, control_port=args.control_port,
         command_log=args.command_log)
-    sim = configured("trustfg mocap-sim", lambda: MocapSim(load_scenario(args.config), options))
+
+    def build() -> MocapSim:
+        relay = None if args.relay is None else RelayOptions(load_scenario(args.relay).natnet, args.relay_stale)
+        return MocapSim(load_scenario(args.config), dataclasses.replace(options, relay=relay))
+
+    sim = configured("trustfg mocap-sim", build)
     stop_on_signals(sim.stop)
-    return sim.run()
+    try:
+        return configured("trustfg mocap-sim", sim.run)  # the relay's upstream is checked as it starts
+    except NatNetConnectionError as exc:
+        print(f"trustfg mocap-sim: --relay: {exc}", file=sys.stderr)
+        return 1

@@ -96,6 +96,10 @@ class CarConfig:
     listen: tuple[str, ...] = ()
     """Zenoh endpoints this car's process listens on, e.g. ``tcp/10.0.0.11:7447``
     (added to ``bus.listen``)."""
+    simulated: bool = True
+    """Whether mocap-sim simulates this car. false: a real car among simulated ones (a
+    mixed fleet): mocap-sim binds no link for it and relays its rigid body from the real
+    motion capture (``trustfg mocap-sim --relay``). Car processes never read it."""
 
     @property
     def body_id(self) -> int:
