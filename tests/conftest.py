@@ -58,7 +58,7 @@ sockets, processes, clocks, a browser or network namespaces. Under pytest-xdist
 (``pytest -n 2``) those modules run in one worker, in order, at normal priority; every
 other module's outcome is simulated time and CPU alone, and runs in a worker of its own at
 the lowest CPU priority (nice 19), on the core the real-time tests leave idle (they keep
-about 1.1 of 2 cores busy: fleets of car processes, browsers, network namespaces)."""
+about one core busy: fleets of car processes, browsers, network namespaces)."""
 
 COMPUTE, REAL_TIME = "compute", "real-time"
 WORKERS_DONE = "workers-done"

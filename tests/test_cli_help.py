@@ -70,8 +70,8 @@ def test_a_user_error_is_one_line_and_a_non_zero_exit(argv):
 
 @pytest.mark.parametrize("name", list(COMMANDS))
 def test_an_option_is_named_whole(name, monkeypatch):
-    """`trustfg faults --seed 40` ran 40 runs: argparse took it for `--seeds`. Every
-    command refuses a shortened option."""
+    """Left to argparse, `trustfg faults --seed 40` would run 40 runs, taken for `--seeds`.
+    Every command refuses a shortened option."""
     parser = parser_of(name, monkeypatch)
     assert parser.allow_abbrev is False
 

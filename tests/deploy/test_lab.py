@@ -1,6 +1,6 @@
-"""The shipped deploy files agree with each other and with docs/lab.md: the systemd unit
-installs with any virtual environment, user and config; the lab configs load, switch the
-deadman on and name the files they are."""
+"""The shipped deploy files agree with each other and with docs/lab-guide.md: the systemd
+unit installs with any virtual environment, user and config; the lab configs load, switch
+the deadman on, name the files they are and the lab guide."""
 
 import shutil
 import subprocess
@@ -47,7 +47,7 @@ def test_the_lab_configs_load_with_the_deadman_on_and_name_themselves(name):
     assert fleet.operator.deadman_s > 0 and not fleet.control.start_timeout_s
     text = (ROOT / "deploy" / "lab" / f"{name}.toml").read_text()
     assert f"deploy/lab/{name}.toml" in text.split("\n\n")[0].replace("\n# ", " ")
-    assert "docs/lab.md" in text
+    assert "docs/lab-guide.md" in text
 
 
 def test_the_secure_lab_uses_tls_everywhere():

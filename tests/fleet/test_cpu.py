@@ -138,7 +138,7 @@ def test_a_run_that_fills_the_cores_is_called_saturated():
     assert machine_load(cpu, 4)["saturated"] is False
     assert machine_load({"car 1": {"share_go_first_arrival": None}}, 2)["busy_cores"] == 0.0  # no go: no window
     # No car arrived: the window runs from the go to the end, and sixteen starved cars are
-    # saturated (a window that never closed had counted them as an idle machine).
+    # saturated (a window that never closes would count them as an idle machine).
     starved = {f"car {i}": {"share_go_first_arrival": None, "share_go_end": 0.115} for i in range(1, 17)}
     assert machine_load(starved, 2)["busy_cores"] == 0.0
     assert machine_load(starved, 2, "end") == {"busy_cores": 1.84, "cores": 2, "saturated": True, "until": "end"}

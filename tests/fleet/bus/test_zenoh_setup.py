@@ -66,8 +66,8 @@ def test_a_setting_the_file_leaves_out_is_ours_not_zenohs_default(tmp_path):
 
 def test_the_labs_zenoh_file_leaves_room_for_the_udp_link():
     """deploy/zenoh/peer-endpoints.json5 does not name max_links, and Zenoh answers its
-    own default (one link per peer) for it: taken as the file's word, that left the peers
-    their TCP link only and no UDP one for the best-effort plans."""
+    own default (one link per peer) for it: taken as the file's word, that would leave the
+    peers their TCP link only and no UDP one for the best-effort plans."""
     base = str(Path(trustfg.__file__).parent / "deploy" / "zenoh" / "peer-endpoints.json5")
     a, a_udp = endpoint(), udp_endpoint()
     with FleetBus(BusConfig(listen=(a, a_udp), zenoh_config=base), FLEET, 1), \

@@ -1,7 +1,7 @@
 """A car process's trust reports carry the time they go out (fleet.car.process): peers
 estimate our clock from these stamps (agent.clocks), and a long replan earlier in the same
-pass of the main loop must not age them. Before, on two starved cores, peers put 13 of the
-16 cars of a fleet half a second behind (the estimate's clamp), all on one clock."""
+pass of the main loop must not age them: on starved cores, stamps taken at the pass's
+start would put a car up to half a second behind (the estimate's clamp) on one clock."""
 
 import threading
 

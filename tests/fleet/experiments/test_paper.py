@@ -52,8 +52,8 @@ def test_transparency_widens_the_berth_around_a_liar(out, made):
     report = run_experiment("transparency", SEEDS, out, JOBS, figures=False, made=made)
     summary = report["summary"]
     # Clearly wider, not the paper's 2x: verification and the guard hold the liar off without
-    # trust too. The ratio over these seeds is 1.59 and over the README's seeds 0-19 1.43 (stop
-    # 50), so the bar is 1.3: it was 1.5, which held here and not there.
+    # trust too, so the bar is 1.3, below what the documented seeds show
+    # (docs/results/paper-experiments.md).
     assert summary["liar_distance_ratio"] >= 1.3
     on = report["variants"]["on"]
     assert all(not run["breaches"] for run in on)
@@ -99,9 +99,9 @@ def test_liars_are_found_out_and_slander_sinks_no_one():
 
 
 def test_each_liar_of_a_pair_is_timed_from_its_own_lies():
-    """A colluding pair (held-out T-junction seed 5): car 3 lied first at -1.62 s, car 1 at
-    -0.7 s and was caught at 1.4 s -- 2.1 s after its own lie, not 3.02 s after its
-    partner's; a liar that never lied is not waited for, one never caught leaves None."""
+    """A colluding pair: car 3 lies first at -1.62 s, car 1 at -0.7 s and is caught at
+    1.4 s -- 2.1 s after its own lie, not 3.02 s after its partner's; a liar that never
+    lied is not waited for, one never caught leaves None."""
     assert detection_delay([1.4, 0.5], [-0.7, -1.62]) == pytest.approx(2.12)
     assert detection_delay([None, 0.5], [None, -1.62]) == pytest.approx(2.12)
     assert detection_delay([None, 0.5], [-0.7, -1.62]) is None

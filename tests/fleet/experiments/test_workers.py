@@ -40,8 +40,7 @@ def _children(pid: int) -> list[int]:
 def test_ctrl_c_or_sigterm_stops_the_runs_under_way_and_leaves_no_worker(tmp_path, signum):
     """Two workers busy with hour-long runs: SIGINT to the parent (as a terminal sends it)
     or SIGTERM (as kill does) ends the parent within seconds, with KeyboardInterrupt, and
-    no worker survives nor prints a traceback. (A concurrent.futures pool, which this
-    replaced, ran its whole queue first; SIGTERM used to kill the parent alone.)"""
+    no worker survives nor prints a traceback."""
     script = tmp_path / "long.py"
     script.write_text(textwrap.dedent("""
         import signal, sys, time

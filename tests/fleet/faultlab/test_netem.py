@@ -119,8 +119,8 @@ def test_lab_needs_root_or_says_why():
 
 @pytest.mark.skipif(available() is not None, reason=str(available()))
 def test_a_killed_runs_lab_is_swept_and_a_live_one_is_not():
-    """A test run killed before its lab's __exit__ leaves namespaces behind (it failed the
-    next CI run's leftover check once): the next sweep removes them, never a live lab's."""
+    """A test run killed before its lab's __exit__ leaves namespaces behind, which would fail
+    the next run's leftover check: the next sweep removes them, never a live lab's."""
     import signal
     import subprocess
     import sys

@@ -86,16 +86,11 @@ def test_honest_cars_distrust_a_liar_over_the_network(liar):
     """Every honest car trusts the liar 0.2 less than every honest peer within 3 s of its
     lie going on (from the trust reports heard), and still less at the end. From a lie
     that goes on (fleet.sim.trust_record.LIE_SUSTAINED_S), not from the liar's departure or
-    its first lie: a liar standing still -- here, now and then, in a deadlock just after
-    it sets off -- has no motion to bend and tells no lie (measured: 1 run in 10 stood
-    from 1.9 to 6 s, its first lie due at 6.15 s, detected at 8.52 s), and one whose plan
-    before the go bends its departure lies before it leaves, then not until it sets off
-    (beside four CPU hogs: lies due from 0.39 s before the go for 0.6 s, then from 0.91 s
-    after it; detected at 3.28 s, 2.37 s after the lie that went on; a CI run once failed
-    the earlier bound from the first lie, 1.1 s, detected at 7.89 s).
-    The end is not held to the 0.2 gap: a liar parked at its goal tells no checkable lie,
-    and forgetting (0.85/s) wins back trust while the last car drives on (measured, seed
-    12: 0.50 when it arrived at 15.4 s, 0.74 at 22.3 s)."""
+    its first lie: a liar standing still -- now and then in a deadlock just after it sets
+    off -- has no motion to bend and tells no lie, and one whose plan before the go bends
+    its departure lies briefly before it leaves, then not until it sets off. The end is not
+    held to the 0.2 gap: a liar parked at its goal tells no checkable lie, and forgetting
+    (0.85/s) wins back trust while the last car drives on."""
     out, summary = liar
     assert summary["crashed"] == [] and summary["breaches"] == []
     assert all(summary["reached_goal"])

@@ -50,12 +50,11 @@ def test_a_run_counts_how_each_replan_ended_and_stays_deterministic_under_faults
 def test_doorway_standoffs_are_resolved_by_giving_way():
     """Two cars set off together at the same speed for a door one car wide, replanning at
     the same instants: no plan through it verifies while the other wants it too, and both
-    stand until one gives way -- in every seed (with resolution off, 3 of seeds 100-105
-    never arrive; with the replanning phases drawn, only 2 of seeds 100-123 stood off, so
-    this test ran 24 seeds to meet one). The two swap places, and with verify.swap_first
-    the one that goes first sets off while the other waits for it to leave its goal -- no
-    standoff (stop 37); switched off here, both set off together, as two cars that do not
-    swap would."""
+    stand until one gives way -- in every seed (with resolution off, some never arrive).
+    The scene pins the replanning instants, which seeds would otherwise draw apart. The two
+    swap places, and with verify.swap_first the one that goes first sets off while the
+    other waits for it to leave its goal -- no standoff; switched off here, both set off
+    together, as two cars that do not swap would."""
     scene = load_scenario(SCENES / "doorway-2.toml")
     scene = dataclasses.replace(scene, verify=dataclasses.replace(scene.verify, swap_first=False))
     seeds = range(100, 106)

@@ -12,7 +12,7 @@ from trustfg.fleet.experiments.bank.journals import gather, parse_take, read_jou
 pytestmark = pytest.mark.realtime
 
 
-def _run(scene, method, seed, outcome="success", clearance=0.2, group="bank", code="abc1234"):
+def _run(scene, method, seed, outcome="success", clearance=0.2, group="bank", code="v0.3.0"):
     return {"scene": scene, "method": method, "seed": seed, "cars": 4, "outcome": outcome,
             "least_clearance_m": clearance, "obstacle_min_clearance_m": 0.3, "breaches": [],
             "arrived": 4 if outcome == "success" else 3, "makespan_s": 12.0 if outcome == "success" else None,
