@@ -35,6 +35,7 @@ COMMANDS = {
     "record": ("trustfg.fleet.recording.mcap_file", "record a live fleet to an MCAP file"),
     "foxglove": ("trustfg.dashboard.foxglove_live", "serve the live fleet to Foxglove (WebSocket protocol)"),
     "report": ("trustfg.dashboard.report", "figures and an HTML report from a recorded run"),
+    "keys": ("trustfg.fleet.operator.keys", "a fleet's car-link keys and TLS certificates, and where each goes"),
     "secure-config": ("trustfg.fleet.bus.security", "Zenoh mutual-TLS and access-control config for one fleet member"),
     "experiment": ("trustfg.fleet.experiments.paper", "run the paper's experiments (and the scenario bank) in-process"),
     "scenario": ("trustfg.fleet.sim.scene_gen", "generate a scene from a seed, or check a scene's starts and goals"),

@@ -59,6 +59,8 @@ def test_help_shows_every_default_and_a_whole_description(name, monkeypatch):
     ["dashboard", "--config", "deploy/lab/fleet-secure.toml", "--operator", "--host", "0.0.0.0"],
     ["sim", "--deadman", "-1"],
     ["secure-config", "--fleet", "x", "--cars", "1", "--certs", "nowhere", "--identity", "car2", "--out", "x"],
+    ["keys", "--config", "lab/fleet", "--cars", "9"],
+    ["keys", "--config", "lab/fleet", "--out", "/proc/no-such-folder"],  # as root: --owner is asked for first
 ])
 def test_a_user_error_is_one_line_and_a_non_zero_exit(argv):
     done = subprocess.run([sys.executable, "-m", "trustfg", *argv], capture_output=True, text=True, timeout=60)

@@ -3,9 +3,9 @@
 A key is 32 random bytes, written as 64 hexadecimal digits (whitespace ignored) in a key
 file of its own (``cars[].link_key_file``; readable by its owner only, never committed) or,
 for throw-away runs, inline (``cars[].link_key``). The car's firmware holds the same bytes.
-``trustfg sim`` makes fresh keys for every run (fleet.launch.link_keys).
-
-    python3 -c "import secrets; print(secrets.token_hex(32))" > car1.key && chmod 600 car1.key
+Its file is ``carN.link.key`` (:func:`key_file_name`): a TLS key is ``carN.tls.key``.
+``trustfg keys`` makes a fleet's keys (fleet.operator.keys); ``trustfg sim`` makes fresh
+keys for every run (fleet.launch.link_keys).
 """
 
 from __future__ import annotations
@@ -70,6 +70,11 @@ def key_for(car_id: int, link_version: int, link_key_file: str, link_key: str) -
         return parse_key(link_key, f"{where}.link_key")
     raise _config_error(f"{where}: the car link (version 2, authenticated) needs the car's key: set "
                       f"link_key_file (or link_version = 1 for old firmware without authentication)")
+
+
+def key_file_name(car_id: int) -> str:
+    """The name of car ``car_id``'s key file: ``car3.link.key``."""
+    return f"car{car_id}.link.key"
 
 
 def new_key() -> bytes:

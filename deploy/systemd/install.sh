@@ -43,4 +43,5 @@ printf '%s\n' "$env" > /etc/trustfg/car.env
 printf '%s\n' "$unit" > /etc/systemd/system/trustfg-car@.service
 systemctl daemon-reload
 echo "installed trustfg-car@.service (runs $venv/bin/trustfg as $user with $config)"
+echo "its key files in /etc/trustfg must belong to $user (as the lines trustfg keys prints install them)"
 echo "next: systemctl enable --now trustfg-car@N (N: this computer's car id)"

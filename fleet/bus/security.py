@@ -20,6 +20,7 @@ from pathlib import Path
 
 from ..program import command_parser
 from . import key_exprs
+from .certificates import CA, cert_name, key_name
 
 ALL_MESSAGES = ["put", "delete", "declare_subscriber", "query", "declare_queryable", "reply",
                 "liveliness_token", "declare_liveliness_subscriber", "liveliness_query"]
@@ -39,10 +40,10 @@ def identities(cars: list[int]) -> list[str]:
 def certificate_names(certs: Path, identity: str, certs_at: str | Path | None = None) -> dict[str, str]:
     """Paths of the CA certificate and of this identity's key and certificate: checked in
     ``certs``, written as under ``certs_at`` (default: ``certs`` itself, resolved)."""
-    names = {"ca": "ca.pem", "key": f"{identity}.key", "cert": f"{identity}.pem"}
+    names = {"ca": cert_name(CA), "key": key_name(identity), "cert": cert_name(identity)}
     missing = [str(certs / name) for name in names.values() if not (certs / name).exists()]
     if missing:
-        raise FileNotFoundError(f"missing TLS files: {', '.join(missing)} (deploy/tls/make-certs.sh makes them)")
+        raise FileNotFoundError(f"missing TLS files: {', '.join(missing)} (trustfg keys makes them)")
     folder = Path(certs_at) if certs_at is not None else certs.resolve()
     return {k: str(folder / name) for k, name in names.items()}
 
@@ -89,7 +90,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = command_parser("trustfg secure-config", __doc__)
     parser.add_argument("--fleet", required=True, help="the fleet's name (its config's `fleet`)")
     parser.add_argument("--cars", type=int, nargs="+", required=True, help="the fleet's car ids")
-    parser.add_argument("--certs", type=Path, required=True, help="folder made by deploy/tls/make-certs.sh (read here)")
+    parser.add_argument("--certs", type=Path, required=True, help="the TLS folder trustfg keys made (its OUT/tls; read here)")
     parser.add_argument("--certs-at", default=CERTS_AT,
                         help="where the certificates will be on the machine that uses this config")
     parser.add_argument("--identity", required=True, help="carN (N one of --cars) or operator")

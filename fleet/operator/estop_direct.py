@@ -17,7 +17,8 @@ import logging
 import time
 from typing import TYPE_CHECKING, Callable, Iterable
 
-from ...bridge.carlink import E_STOP_FLAGS, SOURCE_OPERATOR, Answer, CommandSender, Flags
+from ...bridge.carlink import E_STOP_FLAGS, SOURCE_OPERATOR, Answer, CommandSender, Flags, link_key
+from ...bridge.carlink.direct import resolve
 from .estop_first import DIRECT_REPEAT_S
 
 if TYPE_CHECKING:
@@ -35,6 +36,28 @@ def named(fleet: "Scenario", cars: Iterable[int] = ()) -> list[int]:
     return chosen
 
 
+def missing_paths(fleet: "Scenario") -> dict[int, str]:
+    """Cars the direct path cannot reach from this machine, and why: no ``link``, an
+    address that does not resolve, a key that does not read. Checked without a socket;
+    ``trustfg go`` starts no trial while any is missing."""
+    from ...agent.config import ConfigError, parse_udp_address
+
+    missing = {}
+    for car in fleet.cars:
+        where = f"cars[id={car.id}].link"
+        if not car.link:
+            missing[car.id] = f"{where}: no address"
+            continue
+        try:
+            resolve(parse_udp_address(car.link, where), passive=False)
+            link_key(car)
+        except ConfigError as exc:
+            missing[car.id] = str(exc)
+        except OSError as exc:
+            missing[car.id] = f"{where} {car.link}: {exc.strerror or exc}"
+    return missing
+
+
 class LinkStopper:
     """E_STOP (and PING) datagrams straight to cars' links; see the module docstring."""
 
@@ -45,17 +68,18 @@ class LinkStopper:
         self.release_s = fleet.operator.release_s
         self.senders: dict[int, CommandSender] = {}
         self.unreachable: dict[int, str] = {}
-        """Cars without a direct path, and why (their key does not read on this machine, a
-        bad address): the bus path still stops them."""
+        """Cars without a direct path, and why (their key does not read on this machine, an
+        address that does not resolve): the bus path still stops them."""
         for car in fleet.cars:
             if not car.link:
                 continue
             try:
                 self.senders[car.id] = CommandSender.for_car(car, source=SOURCE_OPERATOR, stamp_clock=clock,
                                                              stop_repeats=0)
-            except ConfigError as exc:
-                self.unreachable[car.id] = str(exc)
-                log.warning("no direct e-stop path to car %d: %s", car.id, exc)
+            except (ConfigError, OSError) as exc:  # a key that does not read, an address that does not resolve
+                why = str(exc) if isinstance(exc, ConfigError) else f"cars[id={car.id}].link {car.link}: {exc}"
+                self.unreachable[car.id] = why
+                log.warning("no direct e-stop path to car %d: %s", car.id, why)
         self._until: dict[int, float] = {}
         self._release_until: dict[int, float] = {}
         self.answers: dict[int, Answer] = {}

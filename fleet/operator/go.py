@@ -6,7 +6,10 @@ ready (waiting, or arrived from the last trial), listing who is and who is not; 
 car missing or e-stopped it does not start, unless ``--allow-missing`` (then only the
 ready cars start). The start names the next trial: every car may set off ``--lead``
 seconds from now (plus ``--stagger`` seconds per car, in id order) at ``--cruise`` m/s.
-It then prints who arrives, until every started car is at its goal (exit 0).
+It then prints who arrives, until every started car is at its goal (exit 0). It starts
+nothing (exit 2) while the e-stop's direct path to a car is missing -- its link key does
+not read on this machine, its address does not resolve -- unless ``--bus-stop-only``
+(then such cars are stopped on the bus alone, and it says so loudly).
 
 Keys, when run in a terminal: SPACE or s e-stops every car (straight on the links and on
 the bus: ``trustfg stop``), r releases them, a aborts the trial (cars hold and wait),
@@ -28,6 +31,7 @@ from ...agent import messages
 from ...agent.scenario_files import load_scenario
 from ..bus.session import BusError, FleetBus
 from ..program import command_parser, configured, stop_on_signals
+from .estop_direct import missing_paths
 from .session import OperatorSession
 
 READY = ("waiting", "arrived")
@@ -42,6 +46,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--cruise", type=float, default=None, help="cruise speed, m/s (default: the planner's)")
     parser.add_argument("--wait", type=float, default=10.0, help="seconds to wait for every car to be ready")
     parser.add_argument("--allow-missing", action="store_true", help="start the ready cars even if some are not")
+    parser.add_argument("--bus-stop-only", action="store_true",
+                        help="start even if the e-stop cannot reach some cars' links directly (the bus path alone)")
     parser.add_argument("--listen", action="append", default=[], help="Zenoh endpoint to listen on (repeatable)")
     args = parser.parse_args(argv)
     fleet = configured("trustfg go", lambda: load_scenario(args.config))
@@ -50,6 +56,14 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--cruise must be within (0, {fleet.vehicle.max_speed_mps}]")
     if not (args.lead > 0 and args.stagger >= 0 and args.wait >= 0):
         parser.error("--lead must be > 0, --stagger and --wait >= 0")
+    missing = missing_paths(fleet)
+    if missing and not args.bus_stop_only:
+        print(f"trustfg go: not starting: no direct e-stop path to {_cars(missing)}; mend that (docs/lab-guide.md, "
+              f"car-link keys), or --bus-stop-only to stop those cars on the bus alone", file=sys.stderr)
+        return 2
+    if missing:
+        print(f"WARNING: --bus-stop-only: the e-stop reaches {_cars(missing)} on the bus alone, through the car "
+              f"process: a hung car process there does not stop its car", file=sys.stderr, flush=True)
     stop = stop_on_signals(threading.Event())
     try:
         with FleetBus(fleet.bus, fleet.fleet, None, listen=tuple(args.listen), kinds=("status",),
@@ -62,6 +76,10 @@ def main(argv: list[str] | None = None) -> int:
     except BusError as exc:
         print(f"trustfg go: {exc}", file=sys.stderr)
         return 1
+
+
+def _cars(missing: dict[int, str]) -> str:
+    return "; ".join(f"car {car} ({why})" for car, why in sorted(missing.items()))
 
 
 class Go:

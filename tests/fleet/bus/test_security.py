@@ -1,22 +1,26 @@
 """Mutual TLS and access control with Zenoh's own features, on real sessions.
 
-Certificates are made at test time by deploy/tls/make-certs.sh (never committed).
+Certificates are made at test time by ``trustfg keys``' own steps (never committed).
 """
 
+import dataclasses
 import json
-import subprocess
+import os
+import pwd
 import time
 
 import pytest
 import zenoh
 
-from tests.conftest import ROOT, wait_for
+from tests.conftest import wait_for
 from trustfg.agent import messages
 from trustfg.agent.config import BusConfig
+from trustfg.agent.scenario_files import load_scenario
 from trustfg.fleet.bus.security import secure_config
 from trustfg.fleet.bus.session import FleetBus
 from trustfg.fleet.bus.zenoh_setup import zenoh_config
 from trustfg.fleet.launch.ports import free_port
+from trustfg.fleet.operator.keys import carry_out, owner_of, survey
 
 pytestmark = pytest.mark.realtime
 
@@ -24,12 +28,18 @@ FLEET = "sec"
 CARS = [1, 2]
 
 
+def make_certs(folder, cars):
+    """A CA of its own, and the operator's and the cars' keys and certificates: OUT/tls."""
+    car = load_scenario("intersection").cars[0]
+    euid = os.geteuid()
+    carry_out(survey([dataclasses.replace(car, id=c) for c in cars], folder, False, True, euid),
+              owner_of(pwd.getpwuid(euid).pw_name, euid))
+    return folder / "tls"
+
+
 @pytest.fixture(scope="module")
 def certs(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("certs")
-    subprocess.run(["bash", str(ROOT / "deploy" / "tls" / "make-certs.sh"), str(folder), *map(str, CARS)],
-                   check=True, capture_output=True)
-    return folder
+    return make_certs(tmp_path_factory.mktemp("certs"), CARS)
 
 
 def write(config: dict, path) -> str:
@@ -62,12 +72,10 @@ def test_cars_with_fleet_certificates_talk(certs, tmp_path):
 def test_a_session_without_a_valid_certificate_can_neither_receive_nor_publish(certs, tmp_path):
     a = tls()
     # A stranger: its own CA and certificate, not the fleet's.
-    stranger_certs = tmp_path / "stranger"
-    subprocess.run(["bash", str(ROOT / "deploy" / "tls" / "make-certs.sh"), str(stranger_certs), "9"],
-                   check=True, capture_output=True)
+    stranger_certs = make_certs(tmp_path / "stranger", [9])
     with secure_bus(certs, tmp_path, "car1", 1, a) as car:
         for name, config in [
-            ("no certificate", {"transport": {"link": {"tls": {"root_ca_certificate": str(certs / "ca.pem"),
+            ("no certificate", {"transport": {"link": {"tls": {"root_ca_certificate": str(certs / "ca.tls.crt"),
                                                                 "verify_name_on_connect": False}}}}),
             ("a foreign CA", secure_config(FLEET, [9], stranger_certs, "car9")),
         ]:
@@ -150,7 +158,8 @@ def test_secure_config_refuses_an_identity_outside_the_fleet_and_writes_where_ce
         secure_config(FLEET, CARS, certs, "car9")
     config = secure_config(FLEET, CARS, certs, "car2", certs_at="/etc/trustfg/tls")
     tls = config["transport"]["link"]["tls"]
-    assert tls["root_ca_certificate"] == "/etc/trustfg/tls/ca.pem"
-    assert tls["connect_certificate"] == "/etc/trustfg/tls/car2.pem"
+    assert tls["root_ca_certificate"] == "/etc/trustfg/tls/ca.tls.crt"
+    assert tls["connect_certificate"] == "/etc/trustfg/tls/car2.tls.crt"
+    assert tls["connect_private_key"] == "/etc/trustfg/tls/car2.tls.key"
     with pytest.raises(FileNotFoundError, match="car3"):
         secure_config(FLEET, [1, 2, 3], certs, "car3")
