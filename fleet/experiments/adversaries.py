@@ -3,7 +3,7 @@
     trustfg experiment adversaries [--seeds 50] [--seed 0] [--scenes lab intersection]
                                    [--attacks NAME ...] [--variants on off wide]
                                    [--held-out intersection-8 --held-out-seeds 20]
-                                   [--jobs J] [--out DIR]
+                                   [--jobs J] [--cluster ADDRESS] [--out DIR]
 
 Per scene, attack (car 1 lies; ``collude``: cars 1 and 3) and seed, the in-process fleet
 runs ``on`` (trust on), ``off`` (the paper's baseline: every plan believed, eps_0) and
@@ -16,12 +16,14 @@ only, reported apart. Writes DIR/adversaries/metrics.json and table.md.
 from __future__ import annotations
 
 import dataclasses
+import sys
 import time
 
 from ...agent.config import AttackConfig, Scenario
 from ...agent.scenario_files import load_scenario
 from ..program import command_parser, configured
 from . import stats
+from .cluster import Cluster, ClusterError, cluster_at
 from .paper import (
     Progress,
     run_one,
@@ -87,8 +89,8 @@ def run_summary(task: tuple) -> dict:
 
 
 def run_matrix(scenes: list[str], attacks: list[str], variants: list[str], seeds: list[int], jobs: int,
-               label: str = "adversaries") -> dict:
-    """{scene: {attack: {variant: [RUN, ...]}}} over every combination."""
+               label: str = "adversaries", cluster: Cluster | None = None) -> dict:
+    """{scene: {attack: {variant: [RUN, ...]}}} over every combination (on ``cluster`` when given)."""
     tasks = []
     for scene in scenes:
         base = load_scenario(scene)
@@ -100,7 +102,7 @@ def run_matrix(scenes: list[str], attacks: list[str], variants: list[str], seeds
                 tasks.extend((scene, attack, variant, made, seed) for seed in seeds)
     results: dict = {}
     progress = Progress(label, len(tasks))
-    for (scene, attack, variant, _, seed), run in parallel(run_summary, tasks, jobs):
+    for (scene, attack, variant, _, seed), run in parallel(run_summary, tasks, jobs, cluster=cluster):
         results.setdefault(scene, {}).setdefault(attack, {}).setdefault(variant, []).append(run)
         progress.step(f"{scene} {attack} {variant} seed {seed}: least clearance "
                       f"{run.get('liar_min_clearance', stats.least_pair_clearance(run)):.3f} m")
@@ -159,9 +161,15 @@ def main(argv: list[str] | None = None) -> int:
     out = study_folder(args.out, "adversaries")
     started = time.perf_counter()
     seeds = list(range(args.seed, args.seed + args.seeds))
-    results = run_matrix(args.scenes, args.attacks, args.variants, seeds, args.jobs)
     held = list(range(args.seed, args.seed + args.held_out_seeds))
-    held_results = run_matrix(args.held_out, args.attacks, ["on"], held, args.jobs, "held-out") if args.held_out else {}
+    try:
+        with cluster_at(args.cluster, args.jobs) as cluster:
+            results = run_matrix(args.scenes, args.attacks, args.variants, seeds, args.jobs, cluster=cluster)
+            held_results = run_matrix(args.held_out, args.attacks, ["on"], held, args.jobs, "held-out",
+                                      cluster) if args.held_out else {}
+    except ClusterError as exc:
+        print(f"trustfg experiment adversaries: {exc}", file=sys.stderr)
+        return 2
     report = {"experiment": "adversaries", "seeds": seeds, "held_out_seeds": held, "liar": LIAR, "partner": PARTNER,
               "attacks": {a: {str(car): dataclasses.asdict(c) for car, c in ATTACKS[a].items()}
                           for a in args.attacks if a in ATTACKS},

@@ -1,7 +1,7 @@
 """The paper's experiments, each run with its factor on and off over many seeds.
 
     trustfg experiment {proximity,consistency,transparency,lab,pipeline,all} [--seed N] [--seeds K]
-                       [--out DIR] [--jobs J]
+                       [--out DIR] [--jobs J] [--cluster ADDRESS]
     trustfg experiment adversaries | transparency-sweep | bank | bank-journals ...
 
 The last four are studies with options of their own (:data:`STUDIES`). An experiment
@@ -40,6 +40,7 @@ from ..sim.in_process import simulate
 from ..sim.run_record import RunRecord, fingerprint, motion_summary, plan_outcomes, rounded
 from ..sim.trust_record import TRUST_GAP, TRUST_SETTLE_S, positions_at
 from . import stats
+from .cluster import Cluster, ClusterError, cluster_at, cluster_option
 from .workers import parallel
 
 log = logging.getLogger(__name__)
@@ -235,8 +236,10 @@ Made = dict[tuple[str, int], tuple[dict, RunRecord]]
 
 
 def run_experiment(name: str, seeds: list[int], out: Path, jobs: int, scenario_file: str | None = None,
-                   figures: bool = True, variants: tuple[str, ...] | None = None, made: Made | None = None) -> dict:
-    """Run experiment ``name`` over ``seeds`` (``variants``: only these of its fleets; None: all).
+                   figures: bool = True, variants: tuple[str, ...] | None = None, made: Made | None = None,
+                   cluster: Cluster | None = None) -> dict:
+    """Run experiment ``name`` over ``seeds`` (``variants``: only these of its fleets; None: all),
+    on ``cluster`` when given, else in ``jobs`` local worker processes.
 
     ``made``: the runs of the experiments before this one in the same call, which it adds
     its own to. A fleet that two experiments share (proximity's and consistency's "on",
@@ -259,7 +262,7 @@ def run_experiment(name: str, seeds: list[int], out: Path, jobs: int, scenario_f
         print(f"[{name}] {len(tasks) - len(todo)} of {len(tasks)} runs not run again: the same fleet and seed "
               "as a run before them, in this experiment or one before it", file=sys.stderr)
     progress = Progress(f"{name}", len(todo))
-    for key, ((variant, _, seed), (run, record)) in zip(todo, parallel(_job, list(todo.values()), jobs)):
+    for key, ((variant, _, seed), (run, record)) in zip(todo, parallel(_job, list(todo.values()), jobs, cluster=cluster)):
         made[key] = (run, record)  # parallel yields in the order of its tasks
         progress.step(f"{variant} seed {seed}: min clearance {stats.least_pair_clearance(run):.3f} m")
     progress.done()
@@ -399,10 +402,11 @@ class Progress:
 
 
 def study_options(parser: argparse.ArgumentParser, seeds: int) -> None:
-    """The options every multi-seed study shares: --seed, --seeds, --jobs, --out."""
+    """The options every multi-seed study shares: --seed, --seeds, --jobs, --cluster, --out."""
     parser.add_argument("--seed", type=int, default=0, help="first seed (default 0)")
     parser.add_argument("--seeds", type=int, default=seeds, help=f"seeds per cell (default {seeds})")
     parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="parallel simulations (default: one per core)")
+    cluster_option(parser)
     parser.add_argument("--out", type=Path, default=None, help="output folder (default runs/experiment-<time>)")
 
 
@@ -454,6 +458,7 @@ def main(argv: list[str] | None = None) -> int:
                         help="output folder (default runs/experiment-<time>)")
     parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
                         help="parallel simulations (default: one per core)")
+    cluster_option(parser)
     parser.add_argument("--scenario", default=None,
                         help="a scenario file or shipped scene's name instead of the experiment's own "
                              "(proximity, consistency: intersection; transparency, lab: lab)")
@@ -467,8 +472,14 @@ def main(argv: list[str] | None = None) -> int:
     if args.scenario:
         configured("trustfg experiment", lambda: load_scenario(args.scenario))
     made: Made = {}  # `all`: a fleet two experiments share runs once
-    for name in names:
-        report = run_experiment(name, seeds, out, args.jobs, args.scenario, figures=not args.no_figures, made=made)
-        print_table(report)
+    try:
+        with cluster_at(args.cluster, args.jobs) as cluster:
+            for name in names:
+                report = run_experiment(name, seeds, out, args.jobs, args.scenario, figures=not args.no_figures,
+                                        made=made, cluster=cluster)
+                print_table(report)
+    except ClusterError as exc:
+        print(f"trustfg experiment: {exc}", file=sys.stderr)
+        return 2
     print(f"\nwrote {out.resolve()}")
     return 0

@@ -10,7 +10,8 @@ loops to, and from the CPU numba compiles for. So a journal entry names its envi
 (:func:`digest` of :func:`environment`) beside its commit: two runs of one seed are the
 same run only when both match (``trustfg experiment bank --recheck K`` reruns K of a
 journal's runs here and says which came out the same; docs/results/scenario-bank.md,
-"Repeating a run", how often they did on another machine).
+"Repeating a run", how often they did on another machine). :func:`code_version` names the
+commit.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ import hashlib
 import json
 import os
 import platform
+import subprocess
 from importlib import metadata
 from pathlib import Path
 
@@ -50,6 +52,24 @@ def environment() -> dict:
         "numba_cpu": _numba_cpu(),
         "variables": {name: value for name, value in sorted(os.environ.items()) if name.startswith(DISPATCH_PREFIXES)},
     }
+
+
+def code_version() -> str:
+    """The commit this package runs from (``git describe --always --dirty``: ``-dirty``
+    when the tree has changes), else the installed version: what a journal entry was
+    run on, so runs of several commits can be told apart."""
+    here = Path(__file__).resolve().parent
+    try:
+        done = subprocess.run(["git", "-C", str(here), "describe", "--always", "--dirty", "--abbrev=7"],
+                              capture_output=True, text=True, timeout=5.0)
+        if done.returncode == 0 and done.stdout.strip():
+            return done.stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        pass
+    try:
+        return "trustfg " + metadata.version("trustfg")
+    except metadata.PackageNotFoundError:
+        return "unknown"
 
 
 def digest(env: dict) -> str:

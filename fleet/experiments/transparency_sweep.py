@@ -2,7 +2,7 @@
 fleet that is simply careful with everyone.
 
     trustfg experiment transparency-sweep [--seeds 30] [--seed 0] [--scene lab]
-        [--misinformation 0.05 0.1 0.2 0.4 0.6 0.8] [--gains 1.5 2 3] [--jobs J] [--out DIR]
+        [--misinformation 0.05 0.1 0.2 0.4 0.6 0.8] [--gains 1.5 2 3] [--jobs J] [--cluster ADDRESS] [--out DIR]
 
 Car 1 is the paper's liar (``displaced+false-testimony``) at every misinformation level p,
 against each fleet: ``on@g`` (trust on, g_max = g), ``wide@g`` (no trust, every plan
@@ -16,6 +16,7 @@ the sweep: docs/design/experiments.md, "The attack suite and the transparency sw
 from __future__ import annotations
 
 import dataclasses
+import sys
 import time
 
 from ...agent.config import Scenario
@@ -23,6 +24,7 @@ from ...agent.scenario_files import load_scenario
 from ..program import command_parser, configured
 from . import stats
 from .adversaries import run_summary
+from .cluster import ClusterError, cluster_at
 from .paper import (
     Progress,
     study_folder,
@@ -77,9 +79,14 @@ def main(argv: list[str] | None = None) -> int:
              for fleet, make in made.items() for seed in seeds]
     results: dict = {}
     progress = Progress("transparency-sweep", len(tasks))
-    for (p, fleet, _, seed), run in parallel(run_summary, tasks, args.jobs):
-        results.setdefault(str(p), {}).setdefault(fleet, []).append(run)
-        progress.step(f"p {p} {fleet} seed {seed}: liar clearance {run['liar_min_clearance']:.3f} m")
+    try:
+        with cluster_at(args.cluster, args.jobs) as cluster:
+            for (p, fleet, _, seed), run in parallel(run_summary, tasks, args.jobs, cluster=cluster):
+                results.setdefault(str(p), {}).setdefault(fleet, []).append(run)
+                progress.step(f"p {p} {fleet} seed {seed}: liar clearance {run['liar_min_clearance']:.3f} m")
+    except ClusterError as exc:
+        print(f"trustfg experiment transparency-sweep: {exc}", file=sys.stderr)
+        return 2
     progress.done()
     summary = {p: {fleet: stats.cell(runs) for fleet, runs in by_fleet.items()} for p, by_fleet in results.items()}
     report = {"experiment": "transparency-sweep", "scene": args.scene, "seeds": seeds, "summary": summary,

@@ -1,8 +1,8 @@
 """The scenario bank: every scene, many seeds, our pipeline and the baselines a user would pick.
 
     trustfg experiment bank [--scenes NAME|FILE ...] [--seed S] [--seeds K] [--methods M ...]
-                            [--fresh K] [--set SECTION.KEY=VALUE ...] [--jobs J] [--out DIR]
-                            [--report-only | --recheck K]
+                            [--fresh K] [--set SECTION.KEY=VALUE ...] [--jobs J] [--cluster ADDRESS]
+                            [--out DIR] [--report-only | --recheck K]
 
 Per scene, method and seed, one in-process run, with the same departures for every method:
 ``full`` (the pipeline as shipped), ``fixed`` (no trust factors, every plan believed, eps_0
@@ -22,7 +22,6 @@ import json
 import os
 import platform
 import secrets
-import subprocess
 import sys
 import time
 import tomllib
@@ -38,7 +37,9 @@ from ...program import command_parser, configured
 from ...sim.in_process import simulate
 from ...sim.run_record import RunRecord, fingerprint, motion_summary
 from .. import run_environment
+from ..cluster import Cluster, ClusterError, cluster_at, cluster_option
 from ..paper import BELIEVING, NO_TRUST, Progress, _sdf
+from ..run_environment import code_version
 from ..workers import parallel
 from . import recheck as bank_recheck
 
@@ -167,18 +168,22 @@ def stuck(record: RunRecord) -> bool:
 
 
 def _case(args: tuple[str, Scenario, str, int]) -> dict:
-    return run_case(*args)
+    """One run, and the digest of the environment it ran in (a cluster's worker may be
+    another machine than the one that journals it)."""
+    return run_case(*args) | {"env": run_environment.digest(run_environment.environment())}
 
 
 # --- the whole bank ----------------------------------------------------------------------------
 
 
 def run_bank(scenes: dict[str, tuple[dict, str]], methods: list[str], seeds: dict[str, list[int]], jobs: int,
-             settings: dict, groups: dict[str, str], journal: Path, run_missing: bool = True) -> list[dict]:
-    """Every (scene, method, seed); ``groups`` says which row (bank or fresh) a scene joins.
+             settings: dict, groups: dict[str, str], journal: Path, run_missing: bool = True,
+             cluster: Cluster | None = None) -> list[dict]:
+    """Every (scene, method, seed); ``groups`` says which row (bank or fresh) a scene joins;
+    the runs go to ``cluster`` when given, else to ``jobs`` local worker processes.
 
     Each finished run is appended to ``journal`` (JSON lines) at once, with the commit it
-    ran on (:func:`code_version`); a run already there
+    ran on (:func:`code_version`) and its environment; a run already there
     for the same scene config, method and seed is not run again, so a long bank that was
     stopped carries on where it stopped when started again with the same --out. With
     ``run_missing`` off, nothing runs: the journal's runs of the selection, and a line
@@ -208,14 +213,17 @@ def run_bank(scenes: dict[str, tuple[dict, str]], methods: list[str], seeds: dic
     if tasks:  # nothing to run (a whole journal, or --report-only): no pool, and the journal untouched
         tasks.sort(key=lambda task: -len(task[1].cars))  # the big scenes first: the pool ends together
         progress = Progress("bank", len(tasks))
-        code, env = code_version(), run_environment.digest(run_environment.environment())
-        others = Counter(run.get("env", "not recorded") for run in runs if run.get("env") != env)
+        code = code_version()
+        envs = cluster.environments() if cluster else {run_environment.digest(run_environment.environment())}
+        others = Counter(run.get("env", "not recorded") for run in runs if run.get("env") not in envs)
         if others:  # carrying on elsewhere: the new runs are runs of their seeds, not replays of the old
             print("note: the journal's runs of this selection ran in other environments ("
-                  + ", ".join(f"{name}: {n}" for name, n in others.items()) + f"), these run in {env} "
-                  "(fleet.experiments.run_environment): a seed rerun here need not repeat an entry", file=sys.stderr)
+                  + ", ".join(f"{name}: {n}" for name, n in others.items()) + f"), these run in "
+                  f"{', '.join(sorted(envs))} (fleet.experiments.run_environment): a seed rerun here need not "
+                  "repeat an entry", file=sys.stderr)
         with journal.open("a") as log:
-            for task, run in parallel(_case, tasks, jobs, ordered=False):
+            for task, run in parallel(_case, tasks, jobs, ordered=False, cluster=cluster):
+                env = run.pop("env")  # the entry's bookkeeping keeps its order: group, fingerprint, code, env
                 run["group"] = groups[run["scene"]]
                 run["fingerprint"] = fingerprint(task[1])
                 run["code"] = code
@@ -232,8 +240,8 @@ def run_bank(scenes: dict[str, tuple[dict, str]], methods: list[str], seeds: dic
 
 
 def recheck(scenes: dict[str, tuple[dict, str]], methods: list[str], seeds: dict[str, list[int]], settings: dict,
-            groups: dict[str, str], out: Path, count: int, jobs: int) -> int:
-    """Rerun ``count`` of the journal's runs of the selection here; each compared with its
+            groups: dict[str, str], out: Path, count: int, jobs: int, cluster: Cluster | None = None) -> int:
+    """Rerun ``count`` of the journal's runs of the selection here (or on ``cluster``); each compared with its
     entry (fleet.experiments.bank.recheck), the lot written to OUT/recheck.json. 0 when every rerun is
     its entry to the last digit, 1 when one is not, 2 when the journal has none."""
     runs = run_bank(scenes, methods, seeds, jobs, settings, groups, out / "runs.jsonl", run_missing=False)
@@ -245,17 +253,18 @@ def recheck(scenes: dict[str, tuple[dict, str]], methods: list[str], seeds: dict
              for scene, method, seed in chosen]
     env = run_environment.environment()
     here = run_environment.digest(env)
-    print(f"rerunning {len(tasks)} of the journal's {len(runs)} runs here (code {code_version()}, env {here})",
-          file=sys.stderr)
+    where = f"on {cluster.address} (code {code_version()}, envs {', '.join(sorted(cluster.environments()))})" \
+        if cluster else f"here (code {code_version()}, env {here})"
+    print(f"rerunning {len(tasks)} of the journal's {len(runs)} runs {where}", file=sys.stderr)
     progress = Progress("recheck", len(tasks))
     rechecked = []
-    for task, rerun in parallel(_case, tasks, jobs, ordered=False):
+    for task, rerun in parallel(_case, tasks, jobs, ordered=False, cluster=cluster):
         entry = chosen[(task[0], task[2], task[3])]
         changed = bank_recheck.differences(entry, rerun)
         rechecked.append({"scene": task[0], "method": task[2], "seed": task[3], "same": not changed,
                           "differences": changed, "journal": {f: entry.get(f) for f in ("code", "env", *bank_recheck.FIELDS)},
-                          "rerun": {f: rerun.get(f) for f in bank_recheck.FIELDS}})
-        progress.step(bank_recheck.line(entry, rerun, here))
+                          "rerun": {f: rerun.get(f) for f in ("env", *bank_recheck.FIELDS)}})
+        progress.step(bank_recheck.line(entry, rerun, rerun["env"]))
         if changed and progress.tty:
             print(file=sys.stderr)  # a rerun that differs keeps its line
     progress.done()
@@ -265,25 +274,6 @@ def recheck(scenes: dict[str, tuple[dict, str]], methods: list[str], seeds: dict
     print(f"{same} of {len(rechecked)} reruns the same as their journal entries to the last digit; "
           f"wrote {(out / 'recheck.json').resolve()}")
     return 0 if same == len(rechecked) else 1
-
-
-def code_version() -> str:
-    """The commit this package runs from (``git describe --always --dirty``: ``-dirty``
-    when the tree has changes), else the installed version: what a journal entry was
-    run on, so runs of several commits can be told apart."""
-    here = Path(__file__).resolve().parent
-    try:
-        done = subprocess.run(["git", "-C", str(here), "describe", "--always", "--dirty", "--abbrev=7"],
-                              capture_output=True, text=True, timeout=5.0)
-        if done.returncode == 0 and done.stdout.strip():
-            return done.stdout.strip()
-    except (OSError, subprocess.SubprocessError):
-        pass
-    from importlib.metadata import PackageNotFoundError, version
-    try:
-        return "trustfg " + version("trustfg")
-    except PackageNotFoundError:
-        return "unknown"
 
 
 def machine() -> dict:
@@ -311,20 +301,29 @@ def main(argv: list[str] | None = None) -> int:
     _add_fresh_scenes(parser, args, out, scenes, groups, seeds)
     if args.recheck:
         try:
-            return recheck(scenes, args.methods, seeds, settings, groups, out, args.recheck, args.jobs)
+            with cluster_at(args.cluster, args.jobs) as cluster:
+                return recheck(scenes, args.methods, seeds, settings, groups, out, args.recheck, args.jobs, cluster)
         except KeyboardInterrupt:
             print("\nstopped; nothing was written", file=sys.stderr)
             return 130
+        except ClusterError as exc:
+            print(f"trustfg experiment bank: {exc}", file=sys.stderr)
+            return 2
     started = time.perf_counter()
     if not args.report_only:  # a report of a folder that holds no journal leaves nothing behind
         out.mkdir(parents=True, exist_ok=True)
     try:
-        runs = run_bank(scenes, args.methods, seeds, args.jobs, settings, groups, out / "runs.jsonl",
-                        run_missing=not args.report_only)
+        with cluster_at(args.cluster, args.jobs) as cluster:  # connected when a run is to go to it
+            runs = run_bank(scenes, args.methods, seeds, args.jobs, settings, groups, out / "runs.jsonl",
+                            run_missing=not args.report_only, cluster=cluster)
     except KeyboardInterrupt:
         print(f"\nstopped; every finished run is in {out / 'runs.jsonl'}: the same command carries on",
               file=sys.stderr)
         return 130
+    except ClusterError as exc:
+        kept = f"; every finished run is in {out / 'runs.jsonl'}" if (out / "runs.jsonl").exists() else ""
+        print(f"trustfg experiment bank: {exc}{kept}", file=sys.stderr)
+        return 2
     if not runs:
         print(f"trustfg experiment bank: no run of this selection in {out / 'runs.jsonl'}", file=sys.stderr)
         return 2
@@ -349,6 +348,7 @@ def _parser() -> argparse.ArgumentParser:
                         help="change a config value of every scene and method (repeatable; TOML values)")
     parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
                         help="parallel runs (default: one per core)")
+    cluster_option(parser)
     parser.add_argument("--out", type=Path, default=None,
                         help="output folder (default runs/bank-<time>); an existing one carries on where it stopped")
     parser.add_argument("--no-figures", action="store_true", help="skip the PNG figure")
