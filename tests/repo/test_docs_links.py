@@ -1,6 +1,6 @@
 """Every relative link in the README and docs/ points at a file of the repository, and every
-#anchor at a heading of it: history moves out of the README into docs/, and a link left
-behind would send a reader nowhere."""
+#anchor at a heading of it: sections move between pages, and a link left behind would send
+a reader nowhere."""
 
 import re
 from pathlib import Path
