@@ -1,20 +1,16 @@
 """``trustfg go --config FILE``: the operator's session -- start a trial, watch it, stop it.
 
-It joins the fleet's bus as the operator and publishes the heartbeat the cars' deadman
-listens for. It waits (``--wait``) until every configured car process is on the bus and
-ready (waiting, or arrived from the last trial), listing who is and who is not; with a
-car missing or e-stopped it does not start, unless ``--allow-missing`` (then only the
-ready cars start). The start names the next trial: every car may set off ``--lead``
-seconds from now (plus ``--stagger`` seconds per car, in id order) at ``--cruise`` m/s.
-It then prints who arrives, until every started car is at its goal (exit 0). It starts
-nothing (exit 2) while the e-stop's direct path to a car is missing -- its link key does
-not read on this machine, its address does not resolve -- unless ``--bus-stop-only``
-(then such cars are stopped on the bus alone, and it says so loudly).
-
-Keys, when run in a terminal: SPACE or s e-stops every car (straight on the links and on
-the bus: ``trustfg stop``), r releases them, a aborts the trial (cars hold and wait),
-q or Ctrl-C aborts the trial and quits. A car stays e-stopped until released, also after
-this session ends.
+It joins the bus as the operator, publishes the heartbeat the cars' deadman listens for,
+and waits (``--wait``) until every car process is on the bus and ready (waiting, or
+arrived from the last trial), saying who is not. With a car missing or e-stopped it starts
+nothing unless ``--allow-missing`` (then the ready cars start); with the e-stop's direct
+path to a car missing (a key that does not read, an address that does not resolve) it
+exits with 2 unless ``--bus-stop-only``, which it says loudly. The start names the next
+trial: every car may set off ``--lead`` s from now (plus ``--stagger`` s per car, in id
+order) at ``--cruise`` m/s; it prints who arrives until every started car is at its goal
+(exit 0). Keys in a terminal: SPACE or s e-stops every car (on the links and the bus), r
+releases, a aborts the trial (cars hold and wait), q or Ctrl-C aborts and quits. A car
+stays e-stopped until released, also after this session ends.
 """
 
 from __future__ import annotations
