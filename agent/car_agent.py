@@ -35,6 +35,7 @@ from .messages import PlanMessage, TrustReport
 from .planner import PeerConstraint, PlanningError, PlanRequest, PlanResult
 from .safe_plan import FALLBACK, FIRST, KEPT, RETRY, Outcome, plan_safely
 from .sightings import Track
+from .steering import held_to
 from .trust import TrustBook
 from .verify import Bounds, verify
 from .witness import Witness, recorder
@@ -263,7 +264,7 @@ class CarAgent:
         if self.at_goal or (np.linalg.norm(motion.position - goal) <= self.scenario.tracking.goal_tolerance_m
                             and now >= self.depart_at):
             self.at_goal = True
-            if self._step_aside(now, motion.position) is None:
+            if self._step_aside(now, motion.position, held_to(self.scenario.vehicle, motion.yaw)) is None:
                 self.plan = standing(motion.position, now)
                 return None
             self.at_goal = False  # parked across a peer's only way: the detour below, then back
@@ -280,8 +281,9 @@ class CarAgent:
             epsilon_obstacle=self.scenario.safety.epsilon_obstacle(self.car.radius_m),
             peers=tuple(c for _, c in constraints), warm_start=self.plan, route=self.car.route,
             lane=(self.car.start, *self.car.route) if now >= self._passing_until else (),
+            steering=held_to(self.scenario.vehicle, motion.yaw),
         )
-        detour = self._give_way(now, motion.position)
+        detour = self._give_way(now, motion.position, request.steering)
         if detour is not None:  # giving way in a deadlock (agent.deadlock): to the detour instead
             request = dataclasses.replace(request, goal=detour, route=(), lane=(), t_arrive=t0 + ARRIVAL_SLACK_S
                                           + float(np.linalg.norm(detour - motion.position)) / self.cruise)
@@ -326,32 +328,33 @@ class CarAgent:
             return None
         started = time.perf_counter()
         verdict = verify(plan, request.peers, self._bounds([peer for peer, _ in constraints]), self.sdf, config,
-                         t_from=t0)
+                         t_from=t0, start_heading=request.heading)
         if not verdict.ok:
             return None
         result = PlanResult(plan, 0, math.nan, math.nan, (time.perf_counter() - started) * 1e3, True)
         return Outcome(plan, KEPT, result, verdict, ("kept",))
 
-    def _give_way(self, now: float, position: np.ndarray) -> np.ndarray | None:
+    def _give_way(self, now: float, position: np.ndarray, steering: tuple[float, float] | None) -> np.ndarray | None:
         """The deadlock watch (agent.deadlock) on what we see: a detour goal while we give
-        way, else None. Counts ``deadlocks`` and ``deadlock_yields``."""
+        way, else None (``steering``: a car-like car's, agent.steering.held_to). Counts
+        ``deadlocks`` and ``deadlock_yields``."""
         seen = peers_seen(self.tracks, self.peers, self.car.id, now, self.scenario.arrival_radius_m)
         safety, r = self.scenario.safety, self.car.radius_m
         blockers = frozenset(self.last_outcome.blocked_by) if self.last_outcome else frozenset()
         detour = self.deadlock.goal(now, position, np.asarray(self.car.goal, float), seen, now >= self.depart_at,
-                                    safety.epsilon_0(r, r), self.sdf, safety.epsilon_obstacle(r), blockers)
+                                    safety.epsilon_0(r, r), self.sdf, safety.epsilon_obstacle(r), blockers, steering)
         for name, count in (("deadlocks", self.deadlock.deadlocks), ("deadlock_yields", self.deadlock.yields)):
             if count:
                 self.counters[name] = count
         return detour
 
-    def _step_aside(self, now: float, position: np.ndarray) -> np.ndarray | None:
+    def _step_aside(self, now: float, position: np.ndarray, steering: tuple[float, float] | None) -> np.ndarray | None:
         """Parked at our goal: where to step aside to when we wall a stalled peer in
         (agent.deadlock), else None. Counts ``deadlock_steps_aside``."""
         seen = peers_seen(self.tracks, self.peers, self.car.id, now, self.scenario.arrival_radius_m)
         safety, r = self.scenario.safety, self.car.radius_m
         aside = self.deadlock.step_aside(now, position, np.asarray(self.car.goal, float), seen,
-                                         safety.epsilon_0(r, r), self.sdf, safety.epsilon_obstacle(r))
+                                         safety.epsilon_0(r, r), self.sdf, safety.epsilon_obstacle(r), steering)
         if self.deadlock.steps_aside:
             self.counters["deadlock_steps_aside"] = self.deadlock.steps_aside
         return aside

@@ -8,6 +8,10 @@ car of the group that has been through the most deadlocks, then the lowest id, g
 every other drives to a detour for ``yield_s``. A car parked at its goal that alone walls
 a stuck peer in steps aside (:meth:`DeadlockWatch.step_aside`) until the peer has a way.
 
+A car-like car (VehicleConfig.steering = "car") passes its heading and turning radius:
+its way to a detour is the arc that turns it there (agent.steering.departure_arc), not a
+turn on the spot, and that arc must keep clear of the walls.
+
 Pure: the caller passes the time and what its car sees. docs/design/safety.md,
 "Deadlocks".
 """
@@ -23,6 +27,7 @@ import numpy as np
 from .config import DeadlockConfig
 from .fallback import MOVING_MPS  # the fallback's "comes to rest": the same test of a plan's end
 from .routes import connected
+from .steering import departure_arc
 from .world import SignedDistanceField
 
 DETOUR_TURNS_DEG = (0.0, 22.5, -22.5, 45.0, -45.0, 67.5, -67.5, 90.0, -90.0, 112.5, -112.5, 135.0, -135.0, 157.5,
@@ -91,13 +96,15 @@ class DeadlockWatch:
 
     def goal(self, now: float, position: np.ndarray, goal: np.ndarray, peers: dict[int, PeerSeen], departed: bool,
              keep_clear: float, sdf: SignedDistanceField, wall_clear: float,
-             blockers: frozenset[int] = frozenset()) -> np.ndarray | None:
+             blockers: frozenset[int] = frozenset(), steering: tuple[float, float] | None = None) -> np.ndarray | None:
         """Record what we see now; the detour goal to plan to while we give way, else None.
 
         ``blockers``: peers our last plans failed verification against (they belong to
         our group however far away, like a car that stands on our goal);
         ``keep_clear``: how far a detour goal must stay from every car we see (centres);
-        ``wall_clear``: from every wall (centre to surface), along the way there too."""
+        ``wall_clear``: from every wall (centre to surface), along the way there too;
+        ``steering``: a car-like car's (heading, turning radius), whose way there turns
+        on that radius (None: a car that turns in place goes straight)."""
         if self.detour is not None:
             if now < self.detour.until or self._still_needed(now, peers, keep_clear, sdf, wall_clear):
                 return self.detour.goal
@@ -119,7 +126,7 @@ class DeadlockWatch:
         if not first or not self.config.enabled:
             return None  # we go first (or resolution is off): keep trying for the goal
         goal = detour_goal(position, [_way(peers[cid]) for cid in first], _everyone(peers), self.config.detour_m,
-                           keep_clear, sdf, wall_clear)
+                           keep_clear, sdf, wall_clear, steering)
         if goal is None:
             return None
         self.detour = Detour(goal, now + self.config.yield_s)
@@ -128,9 +135,11 @@ class DeadlockWatch:
         return goal
 
     def step_aside(self, now: float, position: np.ndarray, goal: np.ndarray, peers: dict[int, PeerSeen],
-                   keep_clear: float, sdf: SignedDistanceField, wall_clear: float) -> np.ndarray | None:
+                   keep_clear: float, sdf: SignedDistanceField, wall_clear: float,
+                   steering: tuple[float, float] | None = None) -> np.ndarray | None:
         """For a car parked at its goal: record what we see; where to step aside to when we
-        wall in a stalled peer (docs/design/safety.md, "Deadlocks"), else None."""
+        wall in a stalled peer (docs/design/safety.md, "Deadlocks"), else None;
+        ``steering`` as for :meth:`goal`."""
         if self.detour is not None and self.detour.for_peer is not None and now < self.detour.until:
             return self.detour.goal
         self._record(now, position, goal, peers)
@@ -152,7 +161,7 @@ class DeadlockWatch:
             if not connected(sdf, peer.position, peer.goal, wall_clear, walls):
                 continue  # walled in, but not by us alone
             aside = _aside_goal(position, peer, walls, _everyone(peers), self.config.detour_m, keep_clear, sdf,
-                                wall_clear)
+                                wall_clear, steering)
             if aside is None:
                 continue
             stood = tuple(other for other in standing if other != cid and not peers[other].at_goal)
@@ -267,7 +276,8 @@ def _way(peer: PeerSeen) -> np.ndarray:
 
 
 def detour_goal(position: np.ndarray, ways: list[np.ndarray], everyone: list[np.ndarray], distance: float,
-                keep_clear: float, sdf: SignedDistanceField, wall_clear: float) -> np.ndarray | None:
+                keep_clear: float, sdf: SignedDistanceField, wall_clear: float,
+                steering: tuple[float, float] | None = None) -> np.ndarray | None:
     """A point ``distance`` from ``position`` as directly away from the nearest points of
     ``ways`` (of the cars that go first) as walls and cars allow, and ``keep_clear`` off
     those ways and every car seen; None when every direction tried is blocked."""
@@ -275,11 +285,13 @@ def detour_goal(position: np.ndarray, ways: list[np.ndarray], everyone: list[np.
     nearest = [way[int(np.argmin(np.linalg.norm(way - position, axis=1)))] for way in ways]
     away = sum(((position - p) / max(float(np.linalg.norm(position - p)), 1e-6) for p in nearest), np.zeros(2))
     avoid = np.vstack([*ways, *everyone]) if ways or everyone else np.zeros((0, 2))
-    return _first_clear(position, away, DETOUR_TURNS_DEG, distance, avoid, keep_clear, sdf, wall_clear)
+    return _first_clear(position, away, DETOUR_TURNS_DEG, distance, avoid, keep_clear, sdf, wall_clear,
+                        steering=steering)
 
 
 def _aside_goal(position: np.ndarray, peer: PeerSeen, parked: list, everyone: list[np.ndarray], distance: float,
-                keep_clear: float, sdf: SignedDistanceField, wall_clear: float) -> np.ndarray | None:
+                keep_clear: float, sdf: SignedDistanceField, wall_clear: float,
+                steering: tuple[float, float] | None = None) -> np.ndarray | None:
     """A point ``distance`` from ``position``, reached along a clear segment and
     ``keep_clear`` off every car seen, from where we no longer wall ``peer`` in (first
     straight away from it, then turning); None if there is none."""
@@ -287,20 +299,22 @@ def _aside_goal(position: np.ndarray, peer: PeerSeen, parked: list, everyone: li
     return _first_clear(position, position - peer.position, DETOUR_TURNS_DEG + (180.0,), distance, others,
                         keep_clear, sdf, wall_clear,
                         lambda goal: connected(sdf, peer.position, peer.goal, wall_clear,
-                                               [*parked, (tuple(goal), keep_clear)]))
+                                               [*parked, (tuple(goal), keep_clear)]), steering)
 
 
 def _first_clear(position: np.ndarray, away: np.ndarray, turns: tuple[float, ...], distance: float,
                  avoid: np.ndarray, keep_clear: float, sdf: SignedDistanceField, wall_clear: float,
-                 accept=lambda goal: True) -> np.ndarray | None:
+                 accept=lambda goal: True, steering: tuple[float, float] | None = None) -> np.ndarray | None:
     """The first point ``distance`` from ``position``, in the direction ``away`` turned by
-    each of ``turns`` (degrees) in order, whose straight way keeps ``wall_clear`` from the
-    walls, that keeps ``keep_clear`` from every point of ``avoid`` and that ``accept``s."""
+    each of ``turns`` (degrees) in order, whose way there keeps ``wall_clear`` from the
+    walls, that keeps ``keep_clear`` from every point of ``avoid`` and that ``accept``s.
+    The way is straight, or for a car-like car (``steering``: heading, turning radius) the
+    arc that turns it to face the point, then straight."""
     base = math.atan2(away[1], away[0]) if np.linalg.norm(away) > 1e-6 else 0.0
     for turn in turns:
         angle = base + math.radians(turn)
         goal = position + distance * np.array([math.cos(angle), math.sin(angle)])
-        way = position + np.linspace(0.0, 1.0, SEGMENT_SAMPLES)[1:, None] * (goal - position)
+        way = _way_to(position, goal, steering)
         if np.min(sdf.distance(way)) < wall_clear:
             continue
         if len(avoid) and np.min(np.linalg.norm(avoid - goal, axis=1)) < keep_clear:
@@ -308,3 +322,15 @@ def _first_clear(position: np.ndarray, away: np.ndarray, turns: tuple[float, ...
         if accept(goal):
             return goal
     return None
+
+
+def _way_to(position: np.ndarray, goal: np.ndarray, steering: tuple[float, float] | None) -> np.ndarray:
+    """Points of the way from ``position`` to ``goal``: straight, or with a car-like car's
+    ``steering`` (heading, turning radius) its departure arc, then straight."""
+    start = position
+    arc = np.zeros((0, 2))
+    if steering is not None:
+        arc = departure_arc(position, steering[0], goal, steering[1])
+        if len(arc):
+            start = arc[-1]
+    return np.vstack([arc, start + np.linspace(0.0, 1.0, SEGMENT_SAMPLES)[1:, None] * (goal - start)])

@@ -48,10 +48,11 @@ def fallback(reference: Plan | None, request: PlanRequest, bounds: Bounds, sdf: 
     velocity = np.asarray(request.velocity, float)
     decel = config.fallback_decel_mps2
     timing = _timing(reference, position, velocity, t_now)
+    heading = request.heading
     if timing is None:
         plan = standing(position, t_now)
-        return plan, verify(plan, request.peers, bounds, sdf, config)
-    verdict = verify(timing, request.peers, bounds, sdf, config, t_from=t_now)
+        return plan, verify(plan, request.peers, bounds, sdf, config, start_heading=heading)
+    verdict = verify(timing, request.peers, bounds, sdf, config, t_from=t_now, start_heading=heading)
     # Kept only if it comes to rest itself: its last support state, not state_at(t_end),
     # which reads zero at the end of every plan -- a cruise at the present speed read as
     # stopping would be kept at every replan, and the car would creep on for good.
@@ -60,7 +61,7 @@ def fallback(reference: Plan | None, request: PlanRequest, bounds: Bounds, sdf: 
     first = min((c.t for c in verdict.conflicts), default=timing.t_end)
     for fraction in BRAKE_FRACTIONS:
         plan = brake_after(timing, t_now + fraction * max(first - t_now, 0.0), decel, t_now)
-        candidate = verify(plan, request.peers, bounds, sdf, config)
+        candidate = verify(plan, request.peers, bounds, sdf, config, start_heading=heading)
         if candidate.ok:
             return plan, candidate
     return plan, candidate  # braking at once (fraction 0) did not verify either

@@ -9,6 +9,8 @@ at absolute times t_i = t0 + i*dt:
   checks         obstacle hinge (eq. (6)), proximity hinge to every peer (eq. (9)), soft
                  speed limit, lane and consistency (agent.factors), at each support state
                  and between them (agent.interval_factors)
+  car-like       a heading per support state, its start at the car's yaw, no sliding, no
+                 reversing, no curve tighter than the turning radius (agent.heading_factors)
 
 Peers out of reach are left out (:func:`peers_within_reach`); a replan is warm-started
 from the previous plan. docs/design/planner.md.
@@ -28,7 +30,9 @@ from gtsam.symbol_shorthand import V, X
 from . import factors, follower, gaps, interpolate, interval_kernel
 from .config import PlannerConfig
 from .gp import Plan, interpolation_weights
+from .heading_factors import add_heading_factors, insert_headings
 from .interval_factors import add_batched_checks, add_gtsam_interp_checks
+from .steering import departure_arc, initial_headings
 from .world import SignedDistanceField
 
 
@@ -64,6 +68,24 @@ class PlanRequest:
     lane: tuple[tuple[float, float], ...] = ()
     """The car's lane centre line from its original start through its via points (the
     goal closes it); empty: no lane keeping."""
+    steering: tuple[float, float] | None = None
+    """A car-like car's (heading where the plan starts, rad; minimum turning radius, m):
+    the plan sets off along the heading and is held to what front-wheel steering can drive
+    (agent.heading_factors, agent.steering.held_to). None: the car turns in place."""
+
+    @property
+    def car_like(self) -> bool:
+        return self.steering is not None
+
+    @property
+    def heading(self) -> float | None:
+        """A car-like car's heading where the plan starts; None for a car that turns in place."""
+        return None if self.steering is None else self.steering[0]
+
+    @property
+    def min_turn_radius_m(self) -> float:
+        """A car-like car's minimum turning radius; 0 for a car that turns in place."""
+        return 0.0 if self.steering is None else self.steering[1]
 
 
 @dataclass(frozen=True)
@@ -104,15 +126,17 @@ def plan_trajectory(request: PlanRequest, config: PlannerConfig, sdf: SignedDist
     graph = build_graph(request, config, sdf, t0, dt, problem)
     left_out = len(request.peers) - problem.n_peers if config.proximity else 0
     if request.warm_start is not None:
-        values = _values(anchored(request.warm_start.resampled(t0, dt, n), request.position, request.velocity))
+        values = _values(anchored(request.warm_start.resampled(t0, dt, n), request.position, request.velocity),
+                         request.heading if request.car_like else None)
     else:
         # Cold start: the route at a few different paces (early, even, late through the
         # middle); LM starts from the one whose checks cost least, typically the one
         # that is not where the peers are when they are there.
         sigmas = factors.interval_sigmas(problem, config.sigma_obstacle, config.sigma_proximity,
                                          config.sigma_speed, config.sigma_lane, config.sigma_consistency)
-        candidates = [seed_plan(request, t0, dt, n, pace) for pace in SEED_PACES]
-        values = _values(min(candidates, key=lambda seed: _checks_cost(problem, seed, sigmas)))
+        candidates = [seed_plan(request, t0, dt, n, pace, config.turn_radius_margin) for pace in SEED_PACES]
+        values = _values(min(candidates, key=lambda seed: _checks_cost(problem, seed, sigmas)),
+                         request.heading if request.car_like else None)
     params = gtsam.LevenbergMarquardtParams()
     params.setMaxIterations(config.max_iterations)
     params.setRelativeErrorTol(config.relative_error_tol)
@@ -167,7 +191,16 @@ def build_graph(request: PlanRequest, config: PlannerConfig, sdf: SignedDistance
         add_batched_checks(graph, problem, config)
     else:
         add_gtsam_interp_checks(graph, problem, config, states, qc)
+    if request.car_like:
+        add_heading_factors(graph, n, dt, 1.0 / planned_turn_radius(request, config), request.heading,
+                            config.intervals_per_factor, config.sigma_sideways, config.sigma_turning)
     return graph
+
+
+def planned_turn_radius(request: PlanRequest, config: PlannerConfig) -> float:
+    """The radius a car-like plan turns on at the tightest: the car's, widened by
+    ``turn_radius_margin`` so that the tracker has steering left to correct with."""
+    return request.min_turn_radius_m * (1.0 + config.turn_radius_margin)
 
 
 def interval_problem(request: PlanRequest, config: PlannerConfig, sdf: SignedDistanceField,
@@ -255,7 +288,9 @@ SEED_PACES = (1.0, 0.6, 1.6, 2.4)
 """Exponents gamma of the cold-start time warps u -> u**gamma (1: even pace)."""
 
 
-def _values(plan: Plan) -> gtsam.Values:
+def _values(plan: Plan, heading: float | None = None) -> gtsam.Values:
+    """The plan's states as Values; with a ``heading`` (a car-like car's), the heading
+    variables too, started from the plan's directions of motion (agent.steering)."""
     values = gtsam.Values()
     insert = values.insert
     positions, velocities = _state_keys(plan.n)
@@ -263,6 +298,8 @@ def _values(plan: Plan) -> gtsam.Values:
         insert(key, position)
     for key, velocity in zip(velocities, plan.velocities):
         insert(key, velocity)
+    if heading is not None:
+        insert_headings(values, initial_headings(plan.velocities, heading))
     return values
 
 
@@ -272,13 +309,20 @@ def _state_keys(n: int) -> tuple[tuple[int, ...], tuple[int, ...]]:
     return tuple(X(i) for i in range(n)), tuple(V(i) for i in range(n))
 
 
-def seed_plan(request: PlanRequest, t0: float, dt: float, n: int, pace: float = 1.0) -> Plan:
-    """A cold-start trajectory along start -> via points -> goal, easing in and out.
+def seed_plan(request: PlanRequest, t0: float, dt: float, n: int, pace: float = 1.0,
+              turn_radius_margin: float = 0.0) -> Plan:
+    """A cold-start trajectory along start -> via points -> goal, easing in and out; a
+    car-like car's begins with the arc that turns it from its heading to face the first
+    of them (agent.steering.departure_arc, at the planned radius).
 
     The arc length follows smoothstep(w(u)) with w(u) = u**pace on normalised time u, so
     pace > 1 lingers early and hurries late, pace < 1 the reverse.
     """
     points = np.array([request.position, *request.route, request.goal], dtype=float)
+    if request.car_like:
+        radius = request.min_turn_radius_m * (1.0 + turn_radius_margin)
+        arc = departure_arc(points[0], request.heading, points[1], radius)
+        points = np.vstack([points[:1], arc, points[1:]])
     seg = np.linalg.norm(np.diff(points, axis=0), axis=1)
     cum = np.concatenate([[0.0], np.cumsum(seg)])
     length = cum[-1]

@@ -46,6 +46,8 @@ OBSTACLE_PUSH_M = 0.05
 """``other side`` of a wall pushes this much further out than the plan lacks."""
 TIGHTEN_PAD = 1.25
 """``tighten`` raises a broken epsilon by this times how far it was broken."""
+TIGHTEN_RADIUS = 1.25
+"""... and a car-like car's turning radius by this factor when its plan turned too tight."""
 STANDING_M = 0.05
 """A peer whose plan moves it less than this over its span stands (``around``)."""
 AROUND_MARGIN_M = 0.05
@@ -117,7 +119,7 @@ def plan_safely(request: PlanRequest, bounds: Bounds, planner: PlannerConfig, co
         if result is not None:
             last = result
             verdict = verify(result.plan, request.peers, bounds, sdf, config,
-                             start_speed=float(np.linalg.norm(request.velocity)))
+                             start_speed=float(np.linalg.norm(request.velocity)), start_heading=request.heading)
             if verdict.ok:
                 outcome = FIRST if len(tried) == 1 else RETRY
                 if outcome == FIRST and config.pass_head_on:
@@ -193,7 +195,7 @@ def _pass_head_on(request: PlanRequest, backing: PlanResult, bounds: Bounds, pla
     except PlanningError:
         return None
     verdict = verify(result.plan, request.peers, bounds, sdf, config,
-                     start_speed=float(np.linalg.norm(request.velocity)))
+                     start_speed=float(np.linalg.norm(request.velocity)), start_heading=request.heading)
     if not verdict.ok or backs_away(result.plan, request):
         return None
     return result, verdict
@@ -205,11 +207,15 @@ def _timed(result: PlanResult, started: float) -> PlanResult:
 
 def _next_attempt(request: PlanRequest, tried: list[str], failed: PlanResult | None,
                   verdict: Verdict | None, sdf: SignedDistanceField, bounds: Bounds) -> tuple[str, PlanRequest | None]:
-    """The next starting guess not tried yet, cheapest first (None: none left)."""
+    """The next starting guess not tried yet, cheapest first (None: none left). A car-like
+    car's plan that only turns too tight is tightened (a wider radius) and then made anew:
+    keeping its path (``retimed``) keeps the turn."""
     conflicts = verdict.conflicts if verdict else ()
-    distance = [c for c in conflicts if c.kind != "limits"]
-    limits_only = bool(conflicts) and not distance
+    distance = [c for c in conflicts if c.kind in ("obstacle", "peer")]
+    turning = any(c.kind == "turning" for c in conflicts)
+    limits_only = bool(conflicts) and not distance and not turning
     order = (["retimed", "slower", "off lane", "cold"] if limits_only
+             else ["tighten", "cold", "off lane", "slower"] if turning and not distance
              else ["tighten", "around", "other side", "slower", "cold"])
     for name in order:
         if name in tried:
@@ -218,8 +224,8 @@ def _next_attempt(request: PlanRequest, tried: list[str], failed: PlanResult | N
             speed = float(np.linalg.norm(request.velocity))
             return name, dataclasses.replace(request, warm_start=retime(failed.plan, speed, bounds.max_speed_mps,
                                                                         bounds.max_accel_mps2))
-        if name == "tighten" and failed is not None and distance:
-            return name, tightened(request, failed.plan, distance)
+        if name == "tighten" and failed is not None and (distance or turning):
+            return name, tightened(request, failed.plan, list(conflicts))
         if name == "around" and distance:
             way = around_standing(request, distance, sdf)
             if way is not None:
@@ -239,12 +245,16 @@ def _next_attempt(request: PlanRequest, tried: list[str], failed: PlanResult | N
 
 def tightened(request: PlanRequest, failed: Plan, conflicts: list[Conflict]) -> PlanRequest:
     """The request with every broken epsilon raised by TIGHTEN_PAD times how far it was
-    broken, warm-started from the failed plan."""
+    broken (and a car-like car's turning radius by TIGHTEN_RADIUS when it turned too
+    tight), warm-started from the failed plan."""
     extra = {c.peer: c.excess for c in conflicts if c.kind == "peer"}
     peers = tuple(dataclasses.replace(p, epsilon=p.epsilon + TIGHTEN_PAD * extra[i]) if i in extra else p
                   for i, p in enumerate(request.peers))
     wall = max((c.excess for c in conflicts if c.kind == "obstacle"), default=0.0)
-    return dataclasses.replace(request, peers=peers, warm_start=failed,
+    steering = request.steering
+    if steering is not None and any(c.kind == "turning" for c in conflicts):
+        steering = (steering[0], steering[1] * TIGHTEN_RADIUS)
+    return dataclasses.replace(request, peers=peers, warm_start=failed, steering=steering,
                                epsilon_obstacle=request.epsilon_obstacle + TIGHTEN_PAD * wall)
 
 

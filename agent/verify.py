@@ -8,10 +8,12 @@ and How, "Robust MADER", 2022). Over the plan's span, at check times t_k spaced 
     walls    d(p(t_k))            >= eps_obs - tol (eps_obs - d_obs)        (eq. 6)
     peer b   |p(t_k) - p_b(t_k)|  >= eps_ab  - tol (eps_ab  - d_ab)         (eq. 9)
     limits   lag = max_t |int_0^t (|v| - u) dt|  <= limit_lag_m    (first limits_horizon_s)
+    turning  |phi(s_b) - phi(s_a)| <= (s_b - s_a) / R + slack       (car-like cars, whole plan)
 
 u the speed of a car that follows |v| within v_max and a_max from the speed it has
-(agent.follower); a plan that starts nearer may not bring the car nearer. Pure: no clock,
-no I/O. docs/design/safety.md, "Verified plans".
+(agent.follower); phi(s) the path's heading at arc length s, the car's own at s = 0
+(agent.steering.turning_excess). A plan that starts nearer may not bring the car nearer.
+Pure: no clock, no I/O. docs/design/safety.md, "Verified plans".
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ from .follower import follower_speeds
 from .gaps import half_steps, peer_gaps
 from .gp import Plan
 from .planner import PeerConstraint
+from .steering import turning_excess
 from .world import SignedDistanceField
 
 MAX_SAMPLES = 4000
@@ -39,12 +42,13 @@ class Conflict:
     """The worst violation of one kind (and peer) found in a plan."""
 
     kind: str
-    """'obstacle', 'peer' or 'limits' (speed and acceleration)."""
+    """'obstacle', 'peer', 'limits' (speed and acceleration) or 'turning' (a car-like car
+    cannot follow the path from its heading)."""
     t: float
     """Absolute time of the worst sample."""
     excess: float
-    """How far beyond what is tolerated, m (> 0): distance lacking, or lag beyond the
-    allowed one ('limits')."""
+    """How far beyond what is tolerated (> 0): distance lacking, m; lag beyond the allowed
+    one ('limits'), m; heading turned beyond what the radius allows ('turning'), rad."""
     peer: int = -1
     """Index into the peers the plan was checked against ('peer' only)."""
     position: tuple[float, float] = (0.0, 0.0)
@@ -75,11 +79,14 @@ class Bounds:
     """Breach distance d_ab per peer, in the order of the peers checked against."""
     max_speed_mps: float
     max_accel_mps2: float
+    min_turn_radius_m: float = 0.0
+    """A car-like car's minimum turning radius; 0: the car turns in place (no 'turning' check)."""
 
     @classmethod
     def of(cls, epsilon_obstacle: float, obstacle_breach: float, breach: Sequence[float],
            vehicle: VehicleConfig) -> "Bounds":
-        return cls(epsilon_obstacle, obstacle_breach, tuple(breach), vehicle.max_speed_mps, vehicle.max_accel_mps2)
+        return cls(epsilon_obstacle, obstacle_breach, tuple(breach), vehicle.max_speed_mps, vehicle.max_accel_mps2,
+                   vehicle.min_turn_radius_m if vehicle.car_like else 0.0)
 
 
 def check_times(plan: Plan, peers: Sequence[PeerConstraint], sample_m: float,
@@ -97,10 +104,13 @@ def check_times(plan: Plan, peers: Sequence[PeerConstraint], sample_m: float,
 
 
 def verify(plan: Plan, peers: Sequence[PeerConstraint], bounds: Bounds, sdf: SignedDistanceField,
-           config: VerifyConfig, t_from: float | None = None, start_speed: float | None = None) -> Verdict:
+           config: VerifyConfig, t_from: float | None = None, start_speed: float | None = None,
+           start_heading: float | None = None) -> Verdict:
     """Check ``plan`` against the walls, every peer plan it was made against (with that
     peer's epsilon, at the same absolute times), and the vehicle's limits, driven from
-    ``start_speed`` (the speed the car has where the plan starts; default: the plan's own)."""
+    ``start_speed`` (the speed the car has where the plan starts; default: the plan's own)
+    and, for a car-like car, from ``start_heading`` (default: the path's own first
+    direction)."""
     if len(bounds.breach) != len(peers):
         raise ValueError(f"{len(peers)} peers but {len(bounds.breach)} breach distances")
     times = check_times(plan, peers, config.sample_m, t_from)
@@ -111,6 +121,13 @@ def verify(plan: Plan, peers: Sequence[PeerConstraint], bounds: Bounds, sdf: Sig
     tol = config.tolerance
     conflicts: list[Conflict] = []
     own_step = half_steps(p)
+
+    # Car-like: the path's turns against the turning radius, from the car's heading.
+    if bounds.min_turn_radius_m > 0.0:
+        excess, k = turning_excess(p, start_heading, bounds.min_turn_radius_m, config.turning_slack_rad,
+                                   config.sample_m)
+        if excess > 0.0:
+            conflicts.append(Conflict("turning", float(times[k]), excess, position=_xy(p[k])))
 
     # Walls, eq. (6): d(p) - half the step travelled >= eps_obs - tol (eps_obs - d_obs).
     wall = sdf.distance(p) - own_step

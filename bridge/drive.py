@@ -11,7 +11,8 @@ fleet (fleet.sim.in_process, on simulated time) both command their cars through
    other cars it sees and the map's walls ahead of it. A car the guard holds (a cap under
    HELD_MPS) stands and turns on the spot to where its plan goes: the tracker's turn rate
    is made for a car that moves, and spins one held still (docs/design/links.md, "The
-   control tick").
+   control tick"). A car-like car held stands, its turn rate 0; one capped drives the
+   same curve slower (its turn rate scaled with its speed).
 """
 
 from __future__ import annotations
@@ -61,5 +62,7 @@ def drive(plan: Plan | None, t: float, pose: tuple[float, float, float] | None, 
             if cap < HELD_MPS:  # held: stand, and turn to where the plan goes
                 return Command(0.0, turn_on_the_spot(plan, t, *pose, scenario.tracking, scenario.vehicle),
                                guard_limited=True)
+            if scenario.vehicle.car_like:  # slower on the same curve: its wheels keep their angle
+                omega *= cap / v
             return Command(cap, omega, guard_limited=True)
     return Command(v, omega)

@@ -1,4 +1,4 @@
-"""Unicycle trajectory tracking: plan + measured pose -> (v, omega).
+"""Trajectory tracking: plan + measured pose -> (v, omega).
 
 :func:`track` is the controller of Kanayama et al., "A stable tracking control method for
 an autonomous mobile robot" (ICRA 1990); its equations are in its docstring. When the plan
@@ -6,6 +6,11 @@ stands still, the car turns towards the reference point and creeps to it, or sto
 ``goal_tolerance_m``; when it faces more than ``turn_first_deg`` away from the plan's
 direction, it turns on the spot first. :func:`turn_on_the_spot` points a car the guard
 holds to where its plan goes. Commands are clamped to the vehicle's limits; no reversing.
+
+A car-like car (VehicleConfig.steering = "car") never gets a turn rate without speed: its
+omega is clamped to |v| / R_min (the curvature its wheels reach), it turns standing not at
+all, and facing away from its plan it drives on at full lock towards it instead of
+turning on the spot.
 """
 
 from __future__ import annotations
@@ -62,7 +67,10 @@ def track(plan: Plan, t: float, x: float, y: float, yaw: float, gains: TrackingC
     if gains.turns_first(e_theta):
         # Facing away from where the plan goes (after a stop, say): turn on the spot first.
         # Kanayama's turn rate scales with the reference speed, so a car facing backwards
-        # on a plan that sets off gently would hardly turn, and never catch up.
+        # on a plan that sets off gently would hardly turn, and never catch up. A car-like
+        # car cannot: it drives on at the plan's speed on full lock towards it.
+        if limits.car_like:
+            return _clamp(speed_ref, math.copysign(speed_ref * limits.max_curvature, e_theta), limits)
         return _clamp(0.0, gains.k_heading * e_theta, limits)
     v = speed_ref * math.cos(e_theta) + gains.k_along * e_x
     omega = omega_ref + speed_ref * (gains.k_cross * e_y + gains.k_heading * math.sin(e_theta))
@@ -70,8 +78,12 @@ def track(plan: Plan, t: float, x: float, y: float, yaw: float, gains: TrackingC
 
 
 def _clamp(v: float, omega: float, limits: VehicleConfig) -> tuple[float, float]:
+    """Within the vehicle's limits; a car-like car's turn rate also within |v| / R_min."""
     v = min(max(v, -limits.max_reverse_mps), limits.max_speed_mps)
     omega = min(max(omega, -limits.max_turn_rate_radps), limits.max_turn_rate_radps)
+    if limits.car_like:
+        reach = abs(v) * limits.max_curvature
+        omega = min(max(omega, -reach), reach)
     return v, omega
 
 
@@ -80,7 +92,8 @@ def turn_on_the_spot(plan: Plan, t: float, x: float, y: float, yaw: float, gains
     """The turn rate that points a car standing at (x, y, yaw) where the plan goes at t:
     along the plan's velocity, or at its reference point while the plan stands still.
     For a car held still (by the guard, bridge.drive): Kanayama's turn rate assumes the
-    car moves at the reference speed; held, it would only spin with the plan's curvature."""
+    car moves at the reference speed; held, it would only spin with the plan's curvature.
+    0 for a car-like car, which cannot turn standing."""
     (p_ref,), (v_ref,) = plan.state_at(t)
     if float(np.hypot(v_ref[0], v_ref[1])) >= STANDSTILL_MPS:
         heading = math.atan2(v_ref[1], v_ref[0])
@@ -92,6 +105,7 @@ def turn_on_the_spot(plan: Plan, t: float, x: float, y: float, yaw: float, gains
 
 
 def turn_towards(heading: float, yaw: float, gains: TrackingConfig, limits: VehicleConfig) -> float:
-    """The turn rate, standing, from ``yaw`` towards ``heading``: k_heading (heading - yaw), capped."""
+    """The turn rate, standing, from ``yaw`` towards ``heading``: k_heading (heading - yaw),
+    capped; 0 for a car-like car, which cannot turn standing (its plan turns it as it drives)."""
     return _clamp(0.0, gains.k_heading * wrap(heading - yaw), limits)[1]
 

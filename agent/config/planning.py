@@ -55,6 +55,17 @@ class PlannerConfig:
     """Sigma of the soft speed limit's hinge (speed above ``max_speed_mps``), in m/s."""
     sigma_lane: float = 0.15
     """Sigma of the pull towards the lane centre line, in m."""
+    sigma_sideways: float = 0.005
+    """Car-like cars (VehicleConfig.steering = "car"): sigma of the rows that keep a plan's
+    velocity along its heading (no sliding sideways, no reversing), in m/s
+    (agent.heading_factors)."""
+    sigma_turning: float = 0.005
+    """Car-like cars: sigma of the row that keeps a plan's turn within what it moves (no
+    curve tighter than the turning radius), and of the prior that starts it at the car's
+    yaw, in rad."""
+    turn_radius_margin: float = 0.15
+    """Car-like cars: a plan turns on at least the vehicle's min_turn_radius_m times (1 +
+    this), so that the tracker keeps steering to spare for its corrections."""
     max_iterations: int = 30
     """Levenberg-Marquardt iterations a replan's optimisation takes at most."""
     relative_error_tol: float = 1e-3
@@ -100,12 +111,15 @@ class PlannerConfig:
             "qc", "min_horizon_s", "cruise_speed_mps", "max_speed_mps", "sigma_start",
             "sigma_start_velocity", "sigma_goal", "sigma_goal_velocity", "sigma_obstacle",
             "sigma_proximity", "sigma_consistency", "sigma_speed", "sigma_lane", "reach_margin_m", "relative_error_tol", "absolute_error_tol", "lambda_initial",
+            "sigma_sideways", "sigma_turning",
         ):
             positive(getattr(self, name), f"{path}.{name}")
         if self.lambda_factor <= 1.0:
             raise ConfigError(f"{path}.lambda_factor: must be > 1")
         if self.intervals_per_factor < 1:
             raise ConfigError(f"{path}.intervals_per_factor: must be >= 1")
+        if self.turn_radius_margin < 0:
+            raise ConfigError(f"{path}.turn_radius_margin: must be >= 0")
         if self.max_iterations < 1:
             raise ConfigError(f"{path}.max_iterations: must be >= 1")
         if self.interpolation not in ("batched", "gtsam"):
@@ -261,6 +275,14 @@ class VerifyConfig:
     ``limits_horizon_s`` because the plan asks for more speed or acceleration than the
     vehicle has (VehicleConfig): the lag of a follower held to those limits. Less than
     what the tolerance leaves of any margin (3/4 of 5 cm against walls)."""
+    turning_slack_rad: float = 0.15
+    """Car-like cars (VehicleConfig.steering = "car"): how much further a plan's heading may
+    turn, over any stretch of it, than the turning radius allows over that stretch's
+    length, from the car's own heading at its start (agent.steering.turning_excess), in
+    rad. A kink of this size costs a car that cuts it on its tightest circle about
+    R slack^2 / 8 of the path (under a millimetre at R = 0.3 m), and a start this far off
+    its heading about R slack^2 / 2 (3.4 mm): room for sampling and the pose's noise,
+    none for a turn the car cannot make."""
     limits_horizon_s: float = 1.0
     """Speed and acceleration are checked over this first part of a plan: what the car
     executes before it has replanned five times. Further on a plan is a promise of path
@@ -318,7 +340,8 @@ class VerifyConfig:
             raise ConfigError(f"{path}.limit_lag_m: must be >= 0")
         if self.max_attempts < 1 or self.retry_iterations < 1:
             raise ConfigError(f"{path}.max_attempts/retry_iterations: must be >= 1")
-        for name in ("sample_m", "limits_horizon_s", "budget_ms", "fallback_decel_mps2", "peer_hold_s"):
+        for name in ("sample_m", "limits_horizon_s", "budget_ms", "fallback_decel_mps2", "peer_hold_s",
+                     "turning_slack_rad"):
             positive(getattr(self, name), f"{path}.{name}")
 
 

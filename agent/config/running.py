@@ -9,11 +9,30 @@ from dataclasses import dataclass
 
 from .checks import ConfigError, positive
 
+STEERING = ("in-place", "car")
+"""What can steer a car (VehicleConfig.steering)."""
+
 
 @dataclass(frozen=True)
 class VehicleConfig:
-    """Unicycle limits of a car (hard limits of the vehicle model and the controller)."""
+    """A car's body: what steers it and its limits (hard limits of the vehicle model and the
+    controller). A car that turns in place is a unicycle; a car that steers its front wheels
+    is a kinematic bicycle (agent.vehicle), which turns only while it moves, no tighter than
+    ``min_turn_radius_m``. docs/lab-guide.md, "Car-like cars", says how to choose and how
+    ``trustfg calibrate`` measures a car."""
 
+    steering: str = "in-place"
+    """What steers the car: 'in-place' (wheels driven at different speeds: it turns on the
+    spot, within the turn-rate limits below) or 'car' (front wheels that steer: it turns
+    only while it moves, on a radius of at least ``min_turn_radius_m``, and never in
+    place; its plans curve no tighter and start along its heading)."""
+    min_turn_radius_m: float = 0.3
+    """'car': the tightest circle the car's centre drives at full steering lock, in m
+    (its curvature limit is 1 / this). Unused for 'in-place'."""
+    wheelbase_m: float = 0.15
+    """'car': from the rear axle to the front axle, in m. The car's firmware turns a
+    commanded (v, omega) into a steering angle delta = atan(wheelbase_m omega / v), at most
+    atan(wheelbase_m / min_turn_radius_m) either way (docs/carlink.md). Unused for 'in-place'."""
     max_speed_mps: float = 0.8
     """Fastest a car drives forwards."""
     max_reverse_mps: float = 0.0
@@ -25,12 +44,31 @@ class VehicleConfig:
     max_turn_accel_radps2: float = 12.0
     """Largest change of turn rate per second."""
 
+    @property
+    def car_like(self) -> bool:
+        """Does the car steer its front wheels (``steering = "car"``): no turning in place?"""
+        return self.steering == "car"
+
+    @property
+    def max_curvature(self) -> float:
+        """The tightest curvature the car drives, 1/m: 1 / ``min_turn_radius_m`` for a car-like
+        car, inf for one that turns in place."""
+        return 1.0 / self.min_turn_radius_m if self.car_like else math.inf
+
+    @property
+    def max_steer_rad(self) -> float:
+        """The steering angle at full lock, atan(wheelbase_m / min_turn_radius_m), rad."""
+        return math.atan(self.wheelbase_m / self.min_turn_radius_m)
+
     def validate(self, path: str) -> None:
         for name in ("max_speed_mps", "max_accel_mps2", "max_turn_rate_radps",
-                     "max_turn_accel_radps2"):
+                     "max_turn_accel_radps2", "min_turn_radius_m", "wheelbase_m"):
             positive(getattr(self, name), f"{path}.{name}")
         if self.max_reverse_mps < 0:
             raise ConfigError(f"{path}.max_reverse_mps: must be >= 0")
+        if self.steering not in STEERING:
+            raise ConfigError(f"{path}.steering: expected one of {', '.join(map(repr, STEERING))}, "
+                              f"got {self.steering!r}")
 
 
 @dataclass(frozen=True)
