@@ -27,6 +27,13 @@ leaves them out too): wall and CPU time and the replans' wall times are measured
 names the environment of the process that ran it -- a cluster's worker, which on a real
 cluster is another machine, and even here differs (Dask starts its workers with
 OPENBLAS_NUM_THREADS=1, which a pytest process does not set)."""
+WRITTEN_ON = ("code",)
+"""The commit of the checkout that wrote the entry (the command's, not a worker's): the
+same for every run of one command, but another if a commit lands between two commands."""
+
+
+def _run_of(entry: dict) -> dict:
+    return {k: v for k, v in entry.items() if k not in MACHINES_OWN + WRITTEN_ON}
 
 
 def _spawned(pid: int) -> set[int]:
@@ -71,8 +78,8 @@ def _journal(path: Path) -> dict:
 
 def test_a_bank_slice_on_a_local_cluster_journals_what_the_local_pool_journals(tmp_path, capsys):
     """2 scenes x 2 seeds of the full pipeline, by the local pool and by a LocalCluster
-    of 2 worker processes: the same entries but for MACHINES_OWN; and a cluster bank
-    stopped half way carries on from its journal as a local one does."""
+    of 2 worker processes: the same entries but for MACHINES_OWN and WRITTEN_ON; and a
+    cluster bank stopped before its end carries on from its journal as a local one does."""
     assert runner.main([*SLICE, "--out", str(tmp_path / "local")]) == 0
     assert runner.main([*SLICE, "--cluster", "local", "--out", str(tmp_path / "cluster")]) == 0
     assert "cluster local: 2 workers, 2 threads" in capsys.readouterr().err
@@ -80,21 +87,19 @@ def test_a_bank_slice_on_a_local_cluster_journals_what_the_local_pool_journals(t
     assert len(local) == 4 and local.keys() == cluster.keys()
     for key, entry in local.items():
         assert entry.keys() == cluster[key].keys(), key
-        assert ({k: v for k, v in entry.items() if k not in MACHINES_OWN}
-                == {k: v for k, v in cluster[key].items() if k not in MACHINES_OWN}), key
-        assert len(cluster[key]["env"]) == 12 and cluster[key]["code"] == entry["code"]
+        assert _run_of(entry) == _run_of(cluster[key]), key
+        assert len(cluster[key]["env"]) == 12 and cluster[key]["code"]
 
     journal = tmp_path / "cluster" / "runs.jsonl"
-    kept = journal.read_text().splitlines()[:2]  # as if stopped after two runs
+    kept = journal.read_text().splitlines()[:3]  # as if stopped after three runs
     journal.write_text("".join(line + "\n" for line in kept))
     assert runner.main([*SLICE, "--cluster", "local", "--out", str(tmp_path / "cluster")]) == 0
-    assert "2 runs already in" in capsys.readouterr().err
-    assert journal.read_text().splitlines()[:2] == kept
+    assert "3 runs already in" in capsys.readouterr().err
+    assert journal.read_text().splitlines()[:3] == kept
     resumed = _journal(journal)
     assert resumed.keys() == local.keys()
     for key, entry in local.items():
-        assert ({k: v for k, v in entry.items() if k not in MACHINES_OWN}
-                == {k: v for k, v in resumed[key].items() if k not in MACHINES_OWN}), key
+        assert _run_of(entry) == _run_of(resumed[key]), key
 
 
 def test_results_come_in_order_or_as_they_finish_and_the_cluster_leaves_nothing_behind():
