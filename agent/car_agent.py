@@ -34,7 +34,7 @@ from .gp import Plan, standing
 from .messages import PlanMessage, TrustReport
 from .planner import PeerConstraint, PlanningError, PlanRequest, PlanResult
 from .safe_plan import FALLBACK, FIRST, KEPT, RETRY, Outcome, plan_safely
-from .sightings import Track
+from .sightings import Track, predicted_plan, standing_at
 from .steering import held_to
 from .trust import TrustBook
 from .verify import Bounds, verify
@@ -48,11 +48,6 @@ PASS_HOLD_S = 3.0
 keeping, so that the next replans keep to the side it passes on."""
 ARRIVAL_SLACK_S = 1.0
 """Added to path length / cruise speed: time to speed up and slow down."""
-STALE_PREDICTION_S = 1.0
-"""A silent peer is predicted to keep its observed velocity this long, then to stop."""
-STANDING_SEEN_M = 0.02
-"""A peer whose observations over ``trust.standing_seen_s`` all lie this close to its newest
-stands still (motion capture's noise is a millimetre or so)."""
 WARM_GOAL_M = 0.25
 """A plan that ends further than this from the goal does not warm-start a replan."""
 START_FROM_PLAN_M = 0.05
@@ -87,6 +82,9 @@ class CarAgent:
         self._optimised_at: float | None = None
         """When the current plan was optimised and verified (None: it was not, or the car
         has given way since): a plan is kept at most ``verify.keep_s`` after that."""
+        self._optimised_against: dict[int, PeerConstraint] = {}
+        """What the current plan was optimised against, by peer (for kept plans)."""
+        self._optimised_arrival = math.nan
         self._passing_until = -math.inf
         """Until when lane keeping is off: we are passing a peer head on (agent.safe_plan, ``pass``)."""
         self.deadlock = DeadlockWatch(self.car.id, self.scenario.deadlock)
@@ -187,37 +185,18 @@ class CarAgent:
                     self.counters["peers_unverified"] += 1  # not checked yet: not as if trusted
                     epsilon = widest
             else:
-                plan, epsilon = self._predict_from_observation(peer, now), widest
+                plan, epsilon = predicted_plan(self.tracks.get(peer), now, trust.stale_after_s), widest
                 if plan is None:
                     continue
                 self.counters["peers_predicted"] += 1
             if (trust.standing_seen_s > 0 and planner.transparency and epsilon > self.epsilon_0(peer)
                     and self.trust.distrusted(peer, now)):
-                stands_at = self._seen_standing(peer, now)
+                stands_at = standing_at(self.tracks.get(peer), now, trust.standing_seen_s, trust.stale_after_s)
                 if stands_at is not None:  # where it is seen, at eps_0 (docs/design/trust.md, "Seen standing")
                     self.counters["peers_seen_standing"] += 1
                     plan, epsilon = standing(stands_at, now), self.epsilon_0(peer)
             constraints.append((peer, PeerConstraint(plan, epsilon, self._hold(peer))))
         return constraints
-
-    def _seen_standing(self, peer: int, now: float) -> np.ndarray | None:
-        """Where ``peer`` stands if every observation of it over the last
-        ``trust.standing_seen_s`` lies within STANDING_SEEN_M of the newest, the newest
-        and every gap between them no older or longer than ``stale_after_s``; else None."""
-        track, trust = self.tracks.get(peer), self.scenario.trust
-        if track is None or track.last_stamp is None or now - track.last_stamp > trust.stale_after_s:
-            return None
-        samples = track.samples
-        since = samples[-1, 0] - trust.standing_seen_s
-        if samples[0, 0] > since:
-            return None  # not seen that long
-        recent = samples[max(int(np.searchsorted(samples[:, 0], since, side="right")) - 1, 0):]
-        if len(recent) > 1 and np.max(np.diff(recent[:, 0])) > trust.stale_after_s:
-            return None  # unseen for a while within it: it may have moved
-        positions = recent[:, 1:3]
-        if np.max(np.linalg.norm(positions - positions[-1], axis=1)) > STANDING_SEEN_M:
-            return None
-        return positions[-1].copy()
 
     def _hold(self, peer: int) -> float | None:
         """How long verification holds ``peer`` where its plan ends (None: for good). For
@@ -240,18 +219,6 @@ class CarAgent:
         on_our_goal = float(np.linalg.norm(seen.position - np.asarray(self.car.goal, float))) <= reach
         to_our_start = float(np.linalg.norm(np.asarray(view.goal, float) - np.asarray(self.car.start, float))) <= reach
         return self.scenario.verify.peer_hold_s if on_our_goal and to_our_start else None
-
-    def _predict_from_observation(self, peer: int, now: float) -> Plan | None:
-        track = self.tracks.get(peer)
-        motion = track.motion() if track else None
-        if motion is None or now - motion.stamp > self.scenario.trust.stale_after_s:
-            return None
-        n, dt = 9, 0.25
-        tau = np.arange(n) * dt
-        moving = tau < STALE_PREDICTION_S
-        positions = motion.position + np.minimum(tau, STALE_PREDICTION_S)[:, None] * motion.velocity
-        velocities = np.where(moving[:, None], motion.velocity, 0.0)
-        return Plan(t0=motion.stamp, dt=dt, positions=positions, velocities=velocities)
 
     def replan(self, now: float) -> PlanResult | None:
         """Plan from our observed state; None if we cannot (no pose yet, or at the goal)."""
@@ -309,6 +276,8 @@ class CarAgent:
             return None
         self._use(dataclasses.replace(outcome, blocked_by=tuple(constraints[i][0] for i in outcome.blocked_by)))
         self._optimised_at = now if outcome.outcome in (FIRST, RETRY) and detour is None else None
+        self._optimised_against = {peer: c for peer, c in constraints}
+        self._optimised_arrival = self.t_arrive
         if outcome.tried and outcome.tried[-1] == "pass":  # hold the pass: no lane to pull us back in front of the peer
             self._passing_until = now + PASS_HOLD_S
             self.counters["head_on_passes"] += 1  # a retry (plans_retry) that passes a peer met head on
@@ -324,7 +293,8 @@ class CarAgent:
         if (config.keep_s <= 0 or not config.enabled or not on_plan or plan is not self.verified
                 or self._optimised_at is None or now - self._optimised_at > config.keep_s
                 or detour is not None or self.liar is not None
-                or np.linalg.norm(plan.positions[-1] - request.goal) > WARM_GOAL_M):
+                or np.linalg.norm(plan.positions[-1] - request.goal) > WARM_GOAL_M
+                or self._changed_since_optimised(t0, constraints)):
             return None
         started = time.perf_counter()
         verdict = verify(plan, request.peers, self._bounds([peer for peer, _ in constraints]), self.sdf, config,
@@ -333,6 +303,27 @@ class CarAgent:
             return None
         result = PlanResult(plan, 0, math.nan, math.nan, (time.perf_counter() - started) * 1e3, True)
         return Outcome(plan, KEPT, result, verdict, ("kept",))
+
+    def _changed_since_optimised(self, t0: float, constraints: list) -> bool:
+        """Has what the current plan was optimised against changed by more than
+        ``verify.keep_changed_m`` (a peer in or out of reach, an epsilon, a believed plan
+        over the rest of our plan's horizon) or has the planned arrival slipped?"""
+        tolerance = self.scenario.verify.keep_changed_m
+        if tolerance <= 0:
+            return False
+        then = self._optimised_against
+        if self.t_arrive != self._optimised_arrival or {peer for peer, _ in constraints} != set(then):
+            return True
+        times = self.plan.times()
+        times = times[times >= t0]
+        for peer, current in constraints:
+            was = then[peer]
+            if abs(current.epsilon - was.epsilon) > tolerance or current.hold_s != was.hold_s:
+                return True
+            if current.plan is not was.plan and len(times) and float(np.max(np.linalg.norm(
+                    current.plan.position_at(times) - was.plan.position_at(times), axis=1))) > tolerance:
+                return True
+        return False
 
     def _give_way(self, now: float, position: np.ndarray, steering: tuple[float, float] | None) -> np.ndarray | None:
         """The deadlock watch (agent.deadlock) on what we see: a detour goal while we give

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .config.planning import TRACK_HISTORY_S
+from .gp import Plan
 from .motion_fit import quadratic_fit
 
 NEAREST_S = 0.05
@@ -28,6 +29,12 @@ class Motion:
     acceleration: np.ndarray
     yaw: float
 
+
+STALE_PREDICTION_S = 1.0
+"""A peer predicted from its observed motion keeps its velocity this long, then stops."""
+STANDING_SEEN_M = 0.02
+"""A peer whose observations over ``trust.standing_seen_s`` all lie this close to its newest
+stands still (motion capture's noise is a millimetre or so)."""
 
 MAX_SAMPLES = 4096
 """At most this many observations are kept (2 s of a 2 kHz stream): frames that come far
@@ -122,3 +129,37 @@ class Track:
         left = np.maximum(right - 1, 0)
         nearest = np.where(np.abs(stamps[left] - times) <= np.abs(stamps[right] - times), left, right)
         return samples[nearest, 1:3], np.abs(stamps[nearest] - times) <= NEAREST_S
+
+
+def predicted_plan(track: Track | None, now: float, stale_after_s: float) -> Plan | None:
+    """A plan for a car from its observed motion alone (no usable plan of its own): its
+    velocity kept for STALE_PREDICTION_S, then standing; None if it is not seen within
+    ``stale_after_s``."""
+    motion = track.motion() if track else None
+    if motion is None or now - motion.stamp > stale_after_s:
+        return None
+    n, dt = 9, 0.25
+    tau = np.arange(n) * dt
+    moving = tau < STALE_PREDICTION_S
+    positions = motion.position + np.minimum(tau, STALE_PREDICTION_S)[:, None] * motion.velocity
+    velocities = np.where(moving[:, None], motion.velocity, 0.0)
+    return Plan(t0=motion.stamp, dt=dt, positions=positions, velocities=velocities)
+
+
+def standing_at(track: Track | None, now: float, standing_s: float, stale_after_s: float) -> np.ndarray | None:
+    """Where a car stands if every observation of it over the last ``standing_s`` lies
+    within STANDING_SEEN_M of the newest, the newest and every gap between them no older
+    or longer than ``stale_after_s``; else None."""
+    if track is None or track.last_stamp is None or now - track.last_stamp > stale_after_s:
+        return None
+    samples = track.samples
+    since = samples[-1, 0] - standing_s
+    if samples[0, 0] > since:
+        return None  # not seen that long
+    recent = samples[max(int(np.searchsorted(samples[:, 0], since, side="right")) - 1, 0):]
+    if len(recent) > 1 and np.max(np.diff(recent[:, 0])) > stale_after_s:
+        return None  # unseen for a while within it: it may have moved
+    positions = recent[:, 1:3]
+    if np.max(np.linalg.norm(positions - positions[-1], axis=1)) > STANDING_SEEN_M:
+        return None
+    return positions[-1].copy()

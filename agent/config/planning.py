@@ -212,7 +212,7 @@ class TrustConfig:
     only if it closes the gap faster than this: a car tailgated or stood still is not."""
     standing_seen_s: float = 1.0
     """A distrusted peer (transparency trust below the prior's) seen standing still this
-    long (every observation of it within STANDING_SEEN_M of the newest; 0: off, at most
+    long (every observation of it within agent.sightings.STANDING_SEEN_M of the newest; 0: off, at most
     the track's 2 s) is planned against where it stands at no more than eps_0, whatever
     its plans say -- with ``planner.transparency`` on, whose widening this undoes. From
     rest a car closes a gap only slowly (1/2 a t^2), and the next replan sees it move
@@ -331,9 +331,18 @@ class VerifyConfig:
     checked as strictly as a new one but not improved; what it saves is CPU: most replans
     of a car with a clear way."""
 
+    keep_changed_m: float = 0.0
+    """A kept plan goes on only while what its optimisation planned against stands: the
+    same peers, each at an epsilon and with a believed plan within this many metres of
+    then (over the kept plan's remaining horizon), and the same planned arrival; anything
+    else optimises anew (docs/design/planner.md, "Kept plans"). 0: no such check, the plan
+    is kept while it verifies."""
+
     def validate(self, path: str) -> None:
         if self.keep_s < 0:
             raise ConfigError(f"{path}.keep_s: must be >= 0")
+        if self.keep_changed_m < 0:
+            raise ConfigError(f"{path}.keep_changed_m: must be >= 0")
         if not 0.0 <= self.tolerance < 1.0:
             raise ConfigError(f"{path}.tolerance: must be within [0, 1): the breach distance is never eaten")
         if self.limit_lag_m < 0:
