@@ -12,6 +12,7 @@ peer's accepted plan, one that misses by more than ``plan_reject_m`` is refused
 
 from __future__ import annotations
 
+import math
 from collections import Counter, deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -157,12 +158,14 @@ def belief(view: PeerView, now: float) -> tuple[Plan, bool] | None:
 def safety_verdict(motion: Motion, others: list[tuple[Motion, float]], config: TrustConfig) -> tuple[float, float]:
     """(success, failure) of a peer's safety: it fails only if it is closer than the breach
     distance (given per other car) to a car it is closing on."""
+    x, y = motion.position.tolist()
     for other, breach_distance in others:
-        gap = other.position - motion.position
-        distance = float(np.linalg.norm(gap))
-        if distance >= breach_distance:
+        gx, gy = other.position[0] - x, other.position[1] - y
+        distance = math.hypot(gx, gy)
+        if distance >= breach_distance:  # most pairs, most of the time: one hypot, no array
             continue
-        closing = float(motion.velocity @ gap) / max(distance, 1e-9)
+        vx, vy = motion.velocity.tolist()
+        closing = (vx * gx + vy * gy) / max(distance, 1e-9)
         if closing > config.blame_closing_mps:
             return 0.0, 1.0
     return 1.0, 0.0
