@@ -23,6 +23,7 @@ from ...agent import messages
 from ...agent.car_agent import CarAgent
 from ...agent.config import Scenario, SimConfig
 from ...agent.gp import standing
+from ...agent.sight import sight_matrix
 from ...agent.vehicle import VehicleState
 from ...agent.vehicle import step as vehicle_step
 from ...agent.world import SignedDistanceField, build_sdf
@@ -85,6 +86,11 @@ class _Fleet:
         self.vehicles = [VehicleState(c.start[0], c.start[1], c.start_heading) for c in cars]
 
         self.clock = np.array([c.clock_offset_s for c in cars])  # each car's clock minus the fleet's
+        self.ranges = [scenario.sensing_range(c) for c in cars]
+        self.limited = not all(math.isinf(r) for r in self.ranges)
+        """Some car sees only the peers near it (SensingConfig): its mind and guard get theirs alone."""
+        self.sight = np.ones((n, n), dtype=bool)
+        """sight[j, i]: car j sees car i now."""
         self.network = Network(sim, n, np.random.default_rng([seed, 11]))
 
         self.steps = int(math.ceil(sim.timeout_s / step_s)) + 1
@@ -92,6 +98,7 @@ class _Fleet:
         self.trust_times, self.trust_rows, self.transparency_rows, self.epsilon_rows = [], [], [], []
         self.arrived: list[float | None] = [None] * n
         self.guard_limited = [0] * n
+        self.tracking_error: list[list[float]] = [[] for _ in range(n)]
         self.plan_log: list = []
         # Replans and reports keep their phase to the go through the wait.
         self.next_replan = phase - math.ceil(sim.settle_s / control.replan_period_s) * control.replan_period_s
@@ -136,14 +143,19 @@ class _Fleet:
                 self.agents[receiver].receive(message, own[receiver])
 
     def _observe(self, own: np.ndarray) -> np.ndarray:
-        """2. Everyone sees everyone (mocap), with noise; seen[j, i]: car i as car j sees it."""
+        """2. Everyone sees everyone (mocap), with noise, or with a sensing range the peers
+        within it (``sight``, from where the cars truly are); seen[j, i]: car i as car j sees it."""
         n, ids = self.n, self.ids
+        if self.limited:
+            sdf = self.sdf if self.scenario.sensing.line_of_sight else None
+            self.sight = sight_matrix([(s.x, s.y) for s in self.vehicles], self.ranges, sdf)
         seen = np.empty((n, n, 3))
         for i, state in enumerate(self.vehicles):
             noisy = self.noise_rng.normal(0.0, self.scenario.sim.observation_noise_m, (n, 2))
             seen[:, i] = np.column_stack([state.x + noisy[:, 0], state.y + noisy[:, 1], np.full(n, state.yaw)])
             for j, agent in enumerate(self.agents):
-                agent.observe(own[j], ids[i], *seen[j, i])
+                if self.sight[j, i]:
+                    agent.observe(own[j], ids[i], *seen[j, i])
         return seen
 
     def _think(self, t: float, own: np.ndarray, going: bool) -> None:
@@ -177,11 +189,14 @@ class _Fleet:
                     math.hypot(state.x - cars[i].goal[0], state.y - cars[i].goal[1]) <= scenario.arrival_radius_m:
                 self.arrived[i] = t
             me = agent.tracks[ids[i]].motion()
-            others = [(*seen[i, j], cars[j].radius_m) for j in range(n) if j != i]
+            others = [(*seen[i, j], cars[j].radius_m) for j in range(n) if j != i and self.sight[i, j]]
             command = drive(agent.plan, own[i], (me.position[0], me.position[1], me.yaw),
                             own[i] >= self.depart[i] and not agent.at_goal, lambda: others, cars[i].radius_m,
                             scenario, self.sdf)
             self.guard_limited[i] += command.guard_limited
+            if not (command.stop or command.guard_limited):  # how closely the car follows its plan
+                (p,) = agent.plan.position_at(np.array([own[i]]))
+                self.tracking_error[i].append(math.hypot(state.x - p[0], state.y - p[1]))
             vehicles[i] = vehicle_step(state, command.v, command.omega, self.step_s, scenario.vehicle)
         return all(a is not None for a in self.arrived) and all(abs(s.v) < 1e-3 for s in vehicles)
 
@@ -214,6 +229,7 @@ class _Fleet:
             plan_log=self.plan_log,
             first_lie_s=[_first_lie(self._lying_minds(i)) for i in range(n)],
             told=[[told for mind in self._lying_minds(i) for told in mind.liar.told] for i in range(n)],
+            tracking_error=[np.array(errors) for errors in self.tracking_error],
         )
 
 

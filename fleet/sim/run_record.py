@@ -49,6 +49,9 @@ class RunRecord:
     what the audit holds it to (agent.attacks.Liar; liars only; None: never)."""
     told: list = field(default_factory=list)
     """Per car: (stamp, plan as published, lied) of every plan a liar published (Liar.told)."""
+    tracking_error: list = field(default_factory=list)
+    """Per car: how far (m) the car was from where its plan had it, at every step it drove
+    on its plan unhindered (departed, not arrived, its command not capped by the guard)."""
 
 
 def arrivals(scenario: Scenario, times: np.ndarray, states: np.ndarray) -> list[float | None]:

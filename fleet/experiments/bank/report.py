@@ -5,7 +5,8 @@ of each outcome (success, breach, contact, deadlock, timeout); the least clearan
 two cars' edges per run (min, 5th percentile, median) and from obstacles and walls (min,
 median); makespan and flowtime over successful runs; replan time (the median of each run's
 median; ORCA: one RVO2 step for the fleet over the number of cars); how the replans ended
-and the deadlocks the cars detected, summed. 95 % intervals are percentile bootstraps
+and the deadlocks the cars detected, summed; how closely the cars followed their plans (the
+median and the largest of each run's 95th percentile of tracking error). 95 % intervals are percentile bootstraps
 (BOOTSTRAP_RESAMPLES resamples of the runs, seeded per cell, so a report repeats); with no
 event in n runs the table gives the rule-of-three upper bound 3/n instead of [0, 0].
 """
@@ -61,6 +62,9 @@ def cell(runs: list[dict]) -> dict:
                     "runs": int(values.size)}
     p95 = [r["replan_ms_p95"] for r in runs if r.get("replan_ms_p95") is not None]
     out["replan_ms_p95_max"] = _r(max(p95)) if p95 else None
+    tracking = np.array([r["tracking_error_p95_m"] for r in runs if r.get("tracking_error_p95_m") is not None])
+    out["tracking_error_p95_m"] = {"median": round(float(np.median(tracking)), 4) if tracking.size else None,
+                                   "max": round(float(tracking.max()), 4) if tracking.size else None}
     pipeline = plan_outcomes([r.get("counters", {}) for r in runs])  # each run's counters are its cars' sums
     replans = sum(pipeline["plans"].values())
     out["plans"] = pipeline["plans"] | {f"{k}_share": round(pipeline["plans"][k] / replans, 4) if replans else None
@@ -122,11 +126,11 @@ def markdown(report: dict) -> str:
               "least clearance between cars:", "", overview(report)]
     header = ("| scene | method | runs | success % | breach % | contact % | deadlock % | timeout % "
               "| least clearance min / median | obstacle clearance min | makespan | flowtime | replan ms "
-              "| replans retried / fell back % |")
+              "| replans retried / fell back % | tracking error p95 median / max |")
     groups = list(dict.fromkeys(c["group"] for c in report["summary"]))
     for group in groups:
         lines += [f"**{'Bank scenes' if group == 'bank' else 'Fresh scenes (held out)'}**", "", header,
-                  "|" + " --- |" * 13]
+                  "|" + " --- |" * 14]
         for c in (c for c in report["summary"] if c["group"] == group):
             label = report["methods"].get(c["method"], {}).get("label", c["method"])
             rates = [_rate(c["rates"][o], c["runs"]) for o in OUTCOMES]
@@ -135,7 +139,7 @@ def markdown(report: dict) -> str:
                 f"| {c['scene']} | {label} | {c['runs']} | " + " | ".join(rates)
                 + f" | {lc['min']:.3f} / {lc['median']:.3f} | {c['obstacle_clearance_m']['min']:.3f}"
                 + f" | {_median(c['makespan_s'])} | {_median(c['flowtime_s'])} | {_median(c['replan_ms_median'], 2)}"
-                + f" | {_shares(c['plans'])} |")
+                + f" | {_shares(c['plans'])} | {_tracking(c.get('tracking_error_p95_m'))} |")
         lines.append("")
     return "\n".join(lines)
 
@@ -161,6 +165,13 @@ def overview(report: dict) -> str:
                          + f", {c['least_clearance_m']['min']:.3f} m")
         lines.append(f"| {scene} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
+
+
+def _tracking(stat: dict | None) -> str:
+    """A cell's tracking error (m): the median and the largest of its runs' p95."""
+    if not stat or stat["median"] is None:
+        return "-"
+    return f"{stat['median']:.3f} / {stat['max']:.3f}"
 
 
 def _shares(plans: dict) -> str:

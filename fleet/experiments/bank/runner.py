@@ -1,8 +1,9 @@
 """The scenario bank: every scene, many seeds, our pipeline and the baselines a user would pick.
 
     trustfg experiment bank [--scenes NAME|FILE ...] [--seed S] [--seeds K] [--methods M ...]
-                            [--fresh K] [--set SECTION.KEY=VALUE ...] [--jobs J] [--cluster ADDRESS]
-                            [--out DIR] [--report-only | --recheck K]
+                            [--fresh K] [--set SECTION.KEY=VALUE ...] [--vehicle in-place|car
+                            [--min-turn-radius M]] [--jobs J] [--cluster ADDRESS] [--out DIR]
+                            [--report-only | --recheck K]
 
 Per scene, method and seed, one in-process run, with the same departures for every method:
 ``full`` (the pipeline as shipped), ``fixed`` (no trust factors, every plan believed, eps_0
@@ -11,7 +12,7 @@ judged on its executed motion: ``breach``, else ``contact``, else ``deadlock`` (
 still out moved DEADLOCK_MOVE_M in the last DEADLOCK_WINDOW_S), else ``timeout``, else
 ``success``. Each run goes to the journal as it ends, so a stopped bank carries on;
 ``--fresh K`` adds random fields nobody tuned on, ``--recheck K`` reruns K journal entries,
-``--set`` changes a config value. docs/design/experiments.md, "The scenario bank".
+``--set`` changes a config value, ``--vehicle car`` drives a fleet of car-like cars. docs/design/experiments.md, "The scenario bank".
 """
 
 from __future__ import annotations
@@ -31,7 +32,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ....agent.config import ConfigError, Scenario
+from ....agent.config import ConfigError, Scenario, VehicleConfig
+from ....agent.config.running import STEERING
 from ....agent.scenario_files import read_source, scenario_from_dict
 from ...program import command_parser, configured
 from ...sim.in_process import simulate
@@ -140,6 +142,7 @@ def judge(scene: str, method: str, scenario: Scenario, record: RunRecord, sdf) -
     else:
         outcome = "deadlock" if stuck(record) else "timeout"
     replans = np.concatenate([np.asarray(r, dtype=float) for r in record.replan_ms]) if record.replan_ms else np.zeros(0)
+    tracking = np.concatenate(record.tracking_error) if record.tracking_error else np.zeros(0)
     counters: dict[str, int] = {}
     for car in record.counters:
         for key, value in car.items():
@@ -154,6 +157,7 @@ def judge(scene: str, method: str, scenario: Scenario, record: RunRecord, sdf) -
         "flowtime_s": round(sum(arrived), 3) if all(a is not None for a in arrived) else None,
         "replan_ms_median": round(float(np.median(replans)), 3) if replans.size else None,
         "replan_ms_p95": round(float(np.percentile(replans, 95)), 3) if replans.size else None,
+        "tracking_error_p95_m": round(float(np.percentile(tracking, 95)), 4) if tracking.size else None,
         "counters": counters,
     }
 
@@ -296,7 +300,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"trustfg experiment bank: {exc}", file=sys.stderr)
             return 2
     out = args.out or Path("runs") / time.strftime("bank-%Y%m%d-%H%M%S")
-    settings = configured("trustfg experiment bank", lambda: parse_settings(args.set))
+    settings = configured("trustfg experiment bank", lambda: with_vehicle(parse_settings(args.set), args))
     scenes, groups, seeds = _chosen_scenes(args, settings)
     _add_fresh_scenes(parser, args, out, scenes, groups, seeds)
     if args.recheck:
@@ -346,6 +350,12 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--fresh-seeds", type=int, default=5, help="seeds per fresh scene (default 5)")
     parser.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
                         help="change a config value of every scene and method (repeatable; TOML values)")
+    parser.add_argument("--vehicle", choices=STEERING, default=None,
+                        help="what steers every car: 'in-place' (turns on the spot) or 'car' (front wheels, "
+                             "--min-turn-radius; default: as each scene says)")
+    parser.add_argument("--min-turn-radius", type=float, default=None, metavar="M",
+                        help="with --vehicle car: the cars' minimum turning radius, m (default: the config's, "
+                             f"{VehicleConfig.min_turn_radius_m})")
     parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
                         help="parallel runs (default: one per core)")
     cluster_option(parser)
@@ -359,6 +369,20 @@ def _parser() -> argparse.ArgumentParser:
                         help="run nothing new: rerun K of the journal's runs of the selection (drawn with a fixed "
                              "seed) and say which came out the same; exit 1 when one did not")
     return parser
+
+
+def with_vehicle(settings: dict, args: argparse.Namespace) -> dict:
+    """``settings`` with --vehicle and --min-turn-radius in its [vehicle] table."""
+    vehicle = {}
+    if args.vehicle is not None:
+        vehicle["steering"] = args.vehicle
+    if args.min_turn_radius is not None:
+        if args.vehicle != "car":
+            raise ConfigError("--min-turn-radius: only with --vehicle car")
+        vehicle["min_turn_radius_m"] = args.min_turn_radius
+    if vehicle:
+        settings.setdefault("vehicle", {}).update(vehicle)
+    return settings
 
 
 def _chosen_scenes(args: argparse.Namespace, settings: dict) -> tuple[dict, dict, dict]:
