@@ -34,6 +34,7 @@ from .gp import Plan, standing
 from .messages import PlanMessage, TrustReport
 from .planner import PeerConstraint, PlanningError, PlanRequest, PlanResult
 from .safe_plan import FALLBACK, FIRST, KEPT, RETRY, Outcome, plan_safely
+from .sight import out_of_sight, unseen_epsilon
 from .sightings import Track, predicted_plan, standing_at
 from .steering import held_to
 from .trust import TrustBook
@@ -73,7 +74,10 @@ class CarAgent:
     def __post_init__(self) -> None:
         self.tracks: dict[int, Track] = {}
         self.peers: dict[int, PeerView] = {}
-        self.trust = TrustBook(owner=self.car.id, config=self.scenario.trust)
+        self.sight_range = self.scenario.sensing_range(self.car)
+        """How far this car sees its peers, m (inf: everywhere; agent.sight)."""
+        self.trust = TrustBook(owner=self.car.id, config=self.scenario.trust,
+                               limited_sight=math.isfinite(self.sight_range))
         self.plan: Plan | None = None
         self.last_result: PlanResult | None = None
         self.verified: Plan | None = None
@@ -155,7 +159,17 @@ class CarAgent:
     def gather_evidence(self, now: float) -> None:
         """Safety and consistency evidence about every seen peer, and the audits of their
         plans (rate-limited: agent.witness.Witness)."""
+        self._look(now)
         self.witness.gather(now, self.tracks, self.peers, self.trust, self.counters)
+
+    def _look(self, now: float) -> frozenset[int]:
+        """The peers out of sight now (limited sight; none with unlimited sight), told to
+        the trust book: testimonies speak for them (docs/design/trust.md, "Limited sight")."""
+        if not self.trust.limited_sight:
+            return frozenset()
+        unseen = out_of_sight(self.tracks, (c.id for c in self.scenario.cars), self.car.id, now)
+        self.trust.see(unseen)
+        return unseen
 
     # --- planning ---------------------------------------------------------------------------
 
@@ -171,6 +185,7 @@ class CarAgent:
         """Every peer we plan around, with the plan we believe and the distance to keep."""
         planner, trust = self.scenario.planner, self.scenario.trust
         constraints = []
+        unseen = self._look(now)
         for peer in sorted(set(self.peers) | set(self.tracks)):
             if peer == self.car.id:
                 continue
@@ -179,7 +194,11 @@ class CarAgent:
             widest = self.epsilon_0(peer) * max(trust.epsilon_gain_max, trust.epsilon_gain_fixed)
             if believed is not None:
                 plan, verified = believed
-                if verified or not trust.reject_plans:
+                if peer in unseen:  # its plan cannot be checked by us: as its witnesses trust it, never fully
+                    self.counters["peers_out_of_sight"] += 1
+                    epsilon = max(self.trust.epsilon(peer, now, self.epsilon_0(peer), planner.transparency),
+                                  unseen_epsilon(self.epsilon_0(peer), trust))
+                elif verified or not trust.reject_plans:
                     epsilon = self.trust.epsilon(peer, now, self.epsilon_0(peer), planner.transparency)
                 else:
                     self.counters["peers_unverified"] += 1  # not checked yet: not as if trusted
@@ -431,6 +450,7 @@ class CarAgent:
         return {car_id: m for car_id, m in seen.items() if m is not None}
 
     def trust_message(self, now: float) -> TrustReport:
+        self._look(now)
         report = self.trust.report(self.car.id, self.next_seq("trust"), now, self.epsilon_0, self.scenario.planner.transparency)
         return self.liar.testimony(report) if self.liar is not None else report
 

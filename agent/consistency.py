@@ -77,7 +77,8 @@ def acceleration_mismatch(view: PeerView, fresh_s: float, until: float) -> tuple
     announcement being the newest
     accepted plan the peer had made when the window began (by its stamp: a plan that
     arrived late still tells what the peer meant then); None if that plan is older than
-    ``fresh_s`` then or there are not enough observations yet. The caller judges a
+    ``fresh_s`` then, there are not enough observations yet, or none within the window's
+    start (the peer was out of sight: the window would span what nobody saw). The caller judges a
     window only once every plan that could still be believed for it has had time to
     arrive (``until`` = now - stale_after_s): a plan delayed in the network counts as if
     it had come at once, never as a car that did not say what it did. A change of mind
@@ -91,8 +92,8 @@ def acceleration_mismatch(view: PeerView, fresh_s: float, until: float) -> tuple
     t, observed = end
     start = next(((t_old, v_old) for t_old, v_old in reversed(view.velocities)
                   if t - t_old >= CONSISTENCY_WINDOW_S - 1e-6), None)
-    if start is None:
-        return None
+    if start is None or t - start[0] > 2.0 * CONSISTENCY_WINDOW_S:
+        return None  # none yet, or the peer was out of sight over the window: no evidence from not seeing
     t_old, observed_old = start
     announced = max(((stamp, p) for stamp, p in view.history if stamp <= t_old), key=lambda sp: sp[0],
                     default=None)

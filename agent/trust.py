@@ -79,6 +79,12 @@ class TrustBook:
     direct: dict[int, Opinion] = field(default_factory=dict)
     testimonies: dict[int, tuple[TrustReport, float]] = field(default_factory=dict)
     """The latest testimony of each reporter and when it arrived."""
+    limited_sight: bool = False
+    """The owner sees only the peers near it (SensingConfig): a testimony that holds no
+    evidence about a peer says nothing of it, and testimonies speak for the peers out of
+    its sight (:meth:`see`). False (the motion capture's view): every peer is seen."""
+    out_of_sight: frozenset = frozenset()
+    """The peers the owner does not see now (limited sight only; :meth:`see`)."""
     counters: Counter = field(default_factory=Counter)
     _rejected: dict = field(default_factory=dict, repr=False)
     """(reporter, peer) -> the report (its seq and stamp) last counted as rejected: a
@@ -121,9 +127,17 @@ class TrustBook:
 
     # --- testimonies ---------------------------------------------------------------------
 
+    def see(self, out_of_sight: frozenset) -> None:
+        """The peers the owner does not see now (limited sight): testimonies about them
+        may stand in for its own eyes where these hold nothing against them."""
+        if out_of_sight != self.out_of_sight:
+            self.out_of_sight = out_of_sight
+            self._fused.clear()
+
     def receive(self, report: TrustReport, now: float | None = None) -> None:
-        """Keep the latest testimony of each reporter (``now``: when it arrived, our clock)."""
-        if report.sender == self.owner:
+        """Keep the latest testimony of each reporter (``now``: when it arrived, our clock);
+        with ``testimonies`` off, none."""
+        if report.sender == self.owner or not self.config.testimonies:
             return
         self.testimonies[report.sender] = (report, report.stamp if now is None else now)
         self._fused.clear()
@@ -169,33 +183,39 @@ class TrustBook:
         own_alpha, own_beta = own.alpha.tolist(), own.beta.tolist()
         own_tau, own_amount = own_tau.tolist(), own_amount.tolist()
         checked = [amount >= c.testimony_min_evidence for amount in own_amount]
-        rows = []  # (weight, r, s, deviates) per reporter
+        # Limited sight: a peer out of sight, against which our own eyes hold nothing (its
+        # trust not below a stranger's), is believed as its witnesses say, raised or lowered.
+        stranger = (pa + 1.0) / (pa + pb + 2.0)
+        unseen = self.limited_sight and peer in self.out_of_sight
+        may_raise = [unseen and tau >= stranger for tau in own_tau]
+        rows = []  # (weight, r, s, left out) per reporter
         for (reporter, seq, stamp), weight, (alphas, betas), age in zip(sources, weights, said, ages):
-            r_row, s_row, deviates = [], [], []
+            r_row, s_row, deviates, silent = [], [], [], []
             for d in range(3):
                 r, s = float(alphas[d]), float(betas[d])
+                silent.append(self.limited_sight and r + s <= 0.0)  # limited sight: it has not seen the peer
                 scale = min(1.0, cap / max(r + s, 1e-12))
                 r, s = r * scale * age, s * scale * age
                 said_tau = (r + pa + 1.0) / (r + pa + s + pb + 2.0)
                 r_row.append(r)
                 s_row.append(s)
-                deviates.append(checked[d] and abs(said_tau - own_tau[d]) > c.testimony_deviation)
-            rows.append((weight, r_row, s_row, deviates))
+                deviates.append(checked[d] and abs(said_tau - own_tau[d]) > c.testimony_deviation and not silent[d])
+            rows.append((weight, r_row, s_row, [x or y for x, y in zip(deviates, silent)]))
             if any(deviates) and self._rejected.get((reporter, peer)) != (seq, stamp):
                 self._rejected[(reporter, peer)] = (seq, stamp)
                 self.counters["testimonies_rejected"] += 1
         alpha, beta = list(own_alpha), list(own_beta)
         for d in range(3):
-            used = [(weight * r_row[d], weight * s_row[d]) for weight, r_row, s_row, deviates in rows
-                    if not deviates[d]]
+            used = [(weight * r_row[d], weight * s_row[d]) for weight, r_row, s_row, left_out in rows
+                    if not left_out[d]]
             count = max(float(len(used)), 1.0)
             r_said = sum(r for r, _ in used) / count  # averaged: dependent sources
             s_said = sum(s for _, s in used) / count
             said_amount = r_said + s_said
             surplus = (said_amount - own_amount[d]) / max(said_amount, 1e-12) if said_amount > own_amount[d] else 0.0
             a, b = own_alpha[d] + surplus * r_said, own_beta[d] + surplus * s_said
-            if (a + 1.0) / (a + b + 2.0) < own_tau[d]:  # testimony may lower trust, never raise it
-                alpha[d], beta[d] = a, b
+            if (a + 1.0) / (a + b + 2.0) < own_tau[d] or (may_raise[d] and used):  # lower, never raise: but
+                alpha[d], beta[d] = a, b  # for the unseen, of which our eyes hold nothing bad
         return np.array(alpha), np.array(beta)
 
     def discount(self, reporter: int, now: float) -> float:

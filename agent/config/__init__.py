@@ -12,6 +12,7 @@ Layering: built-in defaults <- scenario file <- command-line overrides
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 from .attacks import ATTACKS, PAPER_LIAR, AttackConfig, liar_attack, parse_attack
@@ -26,13 +27,13 @@ from .running import (
     TrackingConfig,
     VehicleConfig,
 )
-from .scene import CarConfig, Obstacle, SafetyConfig, SimConfig, WorldConfig
+from .scene import CarConfig, Obstacle, SafetyConfig, SensingConfig, SimConfig, WorldConfig, check_range, guard_needs_m
 
 __all__ = [
     "ConfigError", "parse_udp_address", "positive", "with_overrides", "PlannerConfig", "TrustConfig",
     "VerifyConfig", "DeadlockConfig",
     "BusConfig", "ControlConfig", "GuardConfig", "NatNetConfig", "OperatorConfig", "TrackingConfig", "VehicleConfig",
-    "CarConfig", "Obstacle", "SafetyConfig", "SimConfig", "WorldConfig", "Scenario", "PALETTE",
+    "CarConfig", "Obstacle", "SafetyConfig", "SimConfig", "WorldConfig", "Scenario", "PALETTE", "SensingConfig",
     "ATTACKS", "AttackConfig", "PAPER_LIAR", "liar_attack", "parse_attack", "parse_id_values",
 ]
 
@@ -66,6 +67,8 @@ class Scenario:
     """The trajectory-tracking controller's gains and goal tolerance."""
     guard: GuardConfig = field(default_factory=GuardConfig)
     """The car process's last line of defence: braking for cars and walls ahead."""
+    sensing: SensingConfig = field(default_factory=SensingConfig)
+    """How far a car sees its peers: everywhere (the motion capture), or within a range."""
     sim: SimConfig = field(default_factory=SimConfig)
     """Both simulations: sensor noise, message delays and losses, departures."""
     control: ControlConfig = field(default_factory=ControlConfig)
@@ -90,7 +93,7 @@ class Scenario:
         if len(set(bodies)) != len(bodies):
             raise ConfigError(f"{prefix}cars: rigid-body ids must be unique, got {bodies}")
         for name in ("world", "safety", "planner", "trust", "verify", "deadlock", "vehicle", "tracking", "guard", "sim",
-                     "control", "bus", "natnet", "operator"):
+                     "control", "bus", "natnet", "operator", "sensing"):
             getattr(self, name).validate(prefix + name)
         if self.safety.peer_margin_m < self.trust.transparency_tolerance_m:
             # A liar can bias its plans by anything under the tolerance unnoticed (it reads
@@ -99,6 +102,13 @@ class Scenario:
             raise ConfigError(f"{prefix}safety.peer_margin_m ({self.safety.peer_margin_m}) must be at least "
                               f"trust.transparency_tolerance_m ({self.trust.transparency_tolerance_m}): the margin "
                               "must cover what a liar can bias its plans by unnoticed")
+        if self.guard.enabled:  # the guard sees what the car sees: far enough to stop in time
+            largest = max(car.radius_m for car in self.cars)
+            needs = guard_needs_m(self.safety.breach_distance(largest, largest), self.guard.stop_margin_m,
+                                  self.vehicle.max_speed_mps, self.guard.reaction_s, self.guard.decel_mps2)
+            check_range(self.sensing.range_m, needs, f"{prefix}sensing.range_m")
+            for i, car in enumerate(self.cars):
+                check_range(car.sensing_range_m, needs, f"{prefix}cars[{i}].sensing_range_m")
         if self.operator.deadman_s and self.control.start_timeout_s:
             raise ConfigError(f"{prefix}control.start_timeout_s: a car cannot drive without a start while "
                               f"operator.deadman_s asks it to hear the operator (set one of them to 0)")
@@ -120,6 +130,12 @@ class Scenario:
         arrived: twice the car's own goal tolerance -- the car stops once it *sees* itself
         within the tolerance, so its true position may be off by pose error and braking."""
         return 2.0 * self.tracking.goal_tolerance_m
+
+    def sensing_range(self, car: CarConfig) -> float:
+        """How far ``car`` sees its peers, m (inf: everywhere): its own ``sensing_range_m``,
+        else ``sensing.range_m``."""
+        chosen = car.sensing_range_m if car.sensing_range_m is not None else self.sensing.range_m
+        return math.inf if chosen is None else chosen
 
     def car_colors(self) -> list[str]:
         """Every car's colour (matplotlib names): its own, else the next of PALETTE."""

@@ -222,6 +222,10 @@ class TrustConfig:
     """g for every peer when the transparency factor is off (planner.transparency = false):
     1 keeps eps_0 from everyone (the paper's baseline); more keeps a uniformly wider berth
     from everyone."""
+    testimonies: bool = True
+    """Fuse peers' testimonies into what a car believes (docs/design/trust.md,
+    "Testimonies"). Off: a car believes its own eyes alone and ignores every trust report
+    it hears (it still publishes its own)."""
 
     def validate(self, path: str) -> None:
         if not 0.0 < self.forgetting <= 1.0:

@@ -1,4 +1,4 @@
-"""The scene: the map, the cars on it, and the distances that keep them apart."""
+"""The scene: the map, the cars on it, the distances that keep them apart, and how far cars see."""
 
 from __future__ import annotations
 
@@ -100,6 +100,9 @@ class CarConfig:
     """Whether mocap-sim simulates this car. false: a real car among simulated ones (a
     mixed fleet): mocap-sim binds no link for it and relays its rigid body from the real
     motion capture (``trustfg mocap-sim --relay``). Car processes never read it."""
+    sensing_range_m: float | None = None
+    """How far this car sees its peers, in m (SensingConfig.range_m); not set: the fleet's
+    ``sensing.range_m``."""
 
     @property
     def body_id(self) -> int:
@@ -130,6 +133,8 @@ class CarConfig:
         positive(self.radius_m, f"{path}.radius_m")
         if self.attack is not None:
             self.attack.validate(f"{path}.attack")
+        if self.sensing_range_m is not None:
+            positive(self.sensing_range_m, f"{path}.sensing_range_m")
         if not abs(self.clock_offset_s) <= 60.0:
             raise ConfigError(f"{path}.clock_offset_s: must be within [-60, 60] s")
 
@@ -228,3 +233,48 @@ class SimConfig:
         lo, hi = self.cruise_speed_range_mps
         if not 0 < lo <= hi:
             raise ConfigError(f"{path}.cruise_speed_range_mps: need 0 < low <= high")
+
+
+@dataclass(frozen=True)
+class SensingConfig:
+    """How far a car sees its peers (docs/design/trust.md, "Limited sight"). The motion
+    capture sees every car everywhere; a car on a road sees only its neighbours. With a
+    range set, a car's mind receives the poses of the peers within it only (both
+    simulations and the car process filter what the motion capture hands it), and so does
+    its proximity guard (docs/design/safety.md, "Limited sight"). Peers out of sight are
+    planned against from their shared plans at the epsilon of the trust fused from the
+    testimonies of the cars that see them, never as if fully trusted."""
+
+    range_m: float | None = None
+    """A car sees the peers whose centres are within this distance of its own, in m; not
+    set: every peer, wherever it is (the motion capture's view). A car's own
+    ``sensing_range_m`` replaces it for that car. At least what the proximity guard needs
+    to stop for a car coming head on at the vehicle's top speed (:func:`guard_needs_m`; a
+    shorter range is refused)."""
+    line_of_sight: bool = False
+    """With a range: a peer behind a wall of the map (the straight line between the two
+    centres crosses an obstacle) is out of sight too. Without a range it changes nothing."""
+
+    def validate(self, path: str) -> None:
+        if self.range_m is not None:
+            positive(self.range_m, f"{path}.range_m")
+
+
+def guard_needs_m(breach_m: float, stop_margin_m: float, speed_mps: float, reaction_s: float,
+                  decel_mps2: float) -> float:
+    """The distance at which the proximity guard (agent.guard) must see a peer coming head on,
+    both at ``speed_mps``, to stop both in time: each may use half the gap beyond the
+    breach distance and the stop margin, and needs its reaction plus braking distance
+
+        d = d_ab + stop_margin + 2 (v t_r + v^2 / (2 a))
+
+    (with the defaults, 0.3 + 0.05 + 2 (0.08 + 0.32) = 1.15 m for 0.1 m cars at 0.8 m/s)."""
+    return breach_m + stop_margin_m + 2.0 * (speed_mps * reaction_s + speed_mps ** 2 / (2.0 * decel_mps2))
+
+
+def check_range(range_m: float | None, needs_m: float, path: str) -> None:
+    """Refuse a sensing range shorter than what the guard needs (``needs_m``)."""
+    if range_m is not None and range_m < needs_m:
+        raise ConfigError(f"{path}: {range_m:g} m is shorter than the {needs_m:.2f} m at which the proximity "
+                          "guard must see a car coming head on at the vehicle's top speed to stop in time "
+                          "(agent.config.scene.guard_needs_m)")

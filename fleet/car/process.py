@@ -31,6 +31,7 @@ from ...agent.gp import standing
 from ...agent.operator_state import Mode, Operation
 from ...agent.planner import warm_compiled
 from ...agent.scenario_files import load_scenario
+from ...agent.sight import visible
 from ...agent.world import build_sdf
 from ...bridge import natnet
 from ...bridge.carlink import link_key
@@ -71,6 +72,8 @@ class CarProcess:
         link_key(car)  # a missing or bad key is a config error now, not when driving
         self.stop = threading.Event()
         self.sdf = build_sdf(scenario.world)
+        self._sight_sdf = self.sdf if scenario.sensing.line_of_sight else None
+        """The map that hides peers behind walls (SensingConfig.line_of_sight), else None."""
         self.agent = self._new_agent()
         self.operation = Operation(car.id, scenario.operator)
         self.inbox = messages.Inbox()
@@ -123,13 +126,25 @@ class CarProcess:
         up = self.scenario.natnet.up_axis
         while self.frames:
             t, frame = self.frames.popleft()
+            poses = {}
             for body in frame.rigid_bodies:
                 car_id = self._bodies.get(body.id)
                 if car_id is None or not body.tracking_valid:
                     continue
                 x, y, yaw = natnet.to_ground_plane(body.position, body.orientation, up)
                 if all(map(math.isfinite, (x, y, yaw))):
-                    self.agent.observe(t, car_id, x, y, yaw)
+                    poses[car_id] = (x, y, yaw)
+            # A sensing range (agent.sight): the mind gets the peers within it of where we are.
+            own = poses.get(self.car.id) or self._last_own_xy()
+            for car_id, pose in visible(poses, self.car.id, own, self.agent.sight_range, self._sight_sdf).items():
+                self.agent.observe(t, car_id, *pose)
+
+    def _last_own_xy(self) -> tuple[float, float] | None:
+        """Where the agent last saw its own car (None: never)."""
+        track = self.agent.tracks.get(self.car.id)
+        if track is None or track.last_stamp is None:
+            return None
+        return tuple(track.samples[-1, 1:3])
 
     def _handle(self, received: Received) -> None:
         message = self.inbox.accept(received.payload, key_sender=received.sender)

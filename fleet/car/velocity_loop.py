@@ -29,6 +29,7 @@ from typing import Any
 from ...agent.config import CarConfig, Scenario
 from ...agent.gp import Plan
 from ...agent.guard import reaction_time
+from ...agent.sight import in_sight
 from ...agent.world import SignedDistanceField
 from ...bridge import natnet
 from ...bridge.carlink import SOURCE_CAR_PROCESS, CommandSender, Flags
@@ -169,7 +170,9 @@ class VelocityLoop:
                           self.scenario.natnet.up_axis)
 
     def others_seen(self) -> list[tuple[float, float, float, float]]:
-        """Fresh, tracked poses (x, y, yaw) and radii of every other car of the fleet."""
+        """Fresh, tracked poses (x, y, yaw) and radii of every other car of the fleet, or
+        with a sensing range of those within it (the guard sees what the car sees:
+        docs/design/safety.md, "Limited sight")."""
         now_mono, up = time.monotonic(), self.scenario.natnet.up_axis
         radii = {c.body_id: c.radius_m for c in self.scenario.cars if c.id != self.car.id}
         others = []
@@ -180,6 +183,12 @@ class VelocityLoop:
             x, y, yaw = natnet.to_ground_plane(sample.body.position, sample.body.orientation, up)
             if math.isfinite(x) and math.isfinite(y) and math.isfinite(yaw):
                 others.append((x, y, yaw, radii[body_id]))
+        sight = self.scenario.sensing_range(self.car)
+        if others and math.isfinite(sight):
+            own = self.own_pose()
+            seen = in_sight(own[0][:2], [o[:2] for o in others], sight,
+                            self.sdf if self.scenario.sensing.line_of_sight else None) if own else []
+            others = [o for o, ok in zip(others, seen) if ok]
         return others
 
     def take(self, message: tuple) -> bool:
