@@ -29,6 +29,7 @@ COMMANDS = {
     "go": ("trustfg.fleet.operator.go", "the operator's session: start a trial, watch it, stop it (keys)"),
     "stop": ("trustfg.fleet.operator.estop", "emergency stop (or release, or abort) of the fleet or some cars"),
     "check": ("trustfg.fleet.operator.check", "bring-up check, motors held: poses, links, bus, clocks, what is missing"),
+    "calibrate": ("trustfg.fleet.operator.calibrate", "drive one car through a short pattern and measure its limits"),
     "carlink-test": ("trustfg.bridge.carlink.conformance", "probe a car's link, rule by rule of the receiver (wheels off the floor)"),
     "router": ("trustfg.fleet.bus.router", "a Zenoh router (no zenohd needed) for cars that talk through one"),
     "dashboard": ("trustfg.dashboard.server", "the live web page of a fleet, or a recorded run replayed"),

@@ -21,7 +21,7 @@ import typing
 from pathlib import Path
 from typing import Any
 
-from .config import ConfigError, Scenario
+from .config import ConfigError, Scenario, VehicleConfig
 
 SHIPPED_PACKAGE = "trustfg.deploy"
 
@@ -64,6 +64,24 @@ def load_scenario(source: str | Path) -> Scenario:
         return scenario_from_dict(data)
     except ConfigError as exc:
         raise ConfigError(f"{label}: {exc}") from None
+
+
+def load_vehicle(source: str | Path) -> VehicleConfig:
+    """The [vehicle] table of a TOML file (what ``trustfg calibrate`` writes for one car);
+    raise ConfigError naming the file and the bad key."""
+    text, label = read_source(source)
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{label}: not valid TOML: {exc}") from None
+    if "vehicle" not in data:
+        raise ConfigError(f"{label}: no [vehicle] table")
+    try:
+        vehicle = from_dict(VehicleConfig, data["vehicle"], "vehicle")
+        vehicle.validate("vehicle")
+    except ConfigError as exc:
+        raise ConfigError(f"{label}: {exc}") from None
+    return vehicle
 
 
 def scenario_from_dict(data: dict[str, Any]) -> Scenario:

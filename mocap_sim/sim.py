@@ -1,6 +1,6 @@
 """``trustfg mocap-sim --config FILE``: the lab's hardware, simulated.
 
-:class:`MocapSim` gives every car of the config a simulated unicycle (agent.vehicle) behind
+:class:`MocapSim` gives every car of the config a simulated car (agent.vehicle) behind
 a :class:`~trustfg.bridge.carlink.CommandReceiver` on the car's ``link`` address -- the very
 receiving rules firmware runs, watchdog and e-stop included -- and streams every car's pose
 through a NatNet server (mocap_sim.natnet_server) as Motive would. Physics runs on absolute
@@ -21,13 +21,14 @@ import socket
 import sys
 import threading
 import time
+from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from ..agent.config import ConfigError, Scenario, parse_udp_address
-from ..agent.scenario_files import load_scenario
+from ..agent.config import ConfigError, Scenario, VehicleConfig, parse_udp_address
+from ..agent.scenario_files import load_scenario, load_vehicle
 from ..agent.vehicle import VehicleState, step
 from ..bridge import natnet
 from ..bridge.carlink import CommandReceiver, link_key
@@ -44,8 +45,9 @@ BODY_HEIGHT_M = 0.05
 DESCRIPTION = """\
 ``trustfg mocap-sim --config FILE``: the lab's hardware, simulated.
 
-For every car of the config: a simulated unicycle that takes the same UDP command
-datagrams as a real car on its ``link`` address, through the very receiving rules real
+For every car of the config: a simulated car -- a unicycle, or a kinematic bicycle where
+its [vehicle] says ``steering = "car"`` -- that takes the same UDP command datagrams as a
+real car on its ``link`` address, through the very receiving rules real
 firmware runs (the MAC with the car's key -- or the CRC of version 1 where a car's config
 asks for it --, car id, sessions and sequence order, 250 ms watchdog, e-stop). A NatNet
 server streams every car's pose as Motive would, at the config's NatNet address and ports.
@@ -64,6 +66,12 @@ Fault knobs (all times in seconds since the simulator started):
   --occlude ID:T0:T1     rigid body ID untracked (tracking-valid off) for T0 <= t < T1
   --cut-link ID:T0:T1    car ID hears no commands for T0 <= t < T1 (its watchdog stops it)
   --slip S               relative speed noise of the wheels (std)
+  --command-delay S      every car applies a command S seconds after it takes it (the time
+                         from a datagram to the wheels' motion that ``trustfg calibrate``
+                         measures on a real car)
+  --vehicle CAR=FILE     car CAR's body from the [vehicle] table of FILE (what ``trustfg
+                         calibrate`` writes): its steering, turning radius and limits
+                         instead of the config's [vehicle] (repeatable)
   --control-port P       take faults at run time as JSON datagrams on 127.0.0.1:P (or the
                          NatNet address): {"occlude": BODY, "seconds": S} hides a rigid body
                          from now for S seconds; {"cut_link": CAR, "seconds": S} makes a car
@@ -92,6 +100,17 @@ class Window:
 
     def covers(self, t: float) -> bool:
         return self.start_s <= t < self.end_s
+
+
+def parse_vehicle(text: str) -> tuple[int, VehicleConfig]:
+    """``CAR=FILE`` -> (car id, the [vehicle] table of FILE)."""
+    car, sep, path = text.partition("=")
+    if not (sep and car.strip().isdigit() and path):
+        raise argparse.ArgumentTypeError(f"expected CAR=FILE, got {text!r}")
+    try:
+        return int(car), load_vehicle(path)
+    except ConfigError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def parse_window(text: str) -> Window:
@@ -124,6 +143,10 @@ class MocapSimOptions:
     command_log: Path | None = None
     relay: RelayOptions | None = None
     """Where a mixed fleet's real cars are tracked (mocap_sim.relay); None: every car is simulated."""
+    command_delay_s: float = 0.0
+    """A car applies a command this long after its receiver took it."""
+    vehicles: tuple[tuple[int, VehicleConfig], ...] = ()
+    """(car id, body) of the cars whose body is not the config's [vehicle]."""
 
 
 class MocapSim:
@@ -142,6 +165,13 @@ class MocapSim:
         self._lock = threading.Lock()
         self.states = {car.id: VehicleState(car.start[0], car.start[1], car.start_heading) for car in self.cars}
         self.commands = {car.id: (0.0, 0.0) for car in self.cars}
+        """What each car applies now (the command it took ``command_delay_s`` ago)."""
+        self._taken: dict[int, deque] = {car.id: deque() for car in self.cars}
+        """(time taken, v, omega) of each car's commands not yet applied."""
+        unknown = sorted(set(dict(options.vehicles)) - {car.id for car in self.cars})
+        if unknown:
+            raise ConfigError(f"--vehicle: no simulated car {unknown[0]} in the config")
+        self.vehicles = {car.id: dict(options.vehicles).get(car.id, scenario.vehicle) for car in self.cars}
         self._bodies = {car.id: car.body_id for car in self.cars}
         self._rng = np.random.default_rng([options.seed, 1])
         self._t0 = time.monotonic()
@@ -252,7 +282,7 @@ class MocapSim:
         period = 1.0 / self.options.physics_hz
         truth_period = 1.0 / self.scenario.control.command_rate_hz
         next_truth = time.monotonic()
-        limits = self.scenario.vehicle
+        delay = self.options.command_delay_s
         for _, now in ticks(period, self.stop, max_lag_periods=5):
             t_sim = now - self._t0
             with self._lock:
@@ -262,11 +292,16 @@ class MocapSim:
                            or now < self.deaf_until.get(car_id, 0.0))
                     if cut != receiver.deaf.is_set():  # the car hears nothing while its link is cut
                         receiver.deaf.set() if cut else receiver.deaf.clear()
-                    v, omega = receiver.active_command(now)
+                    taken = self._taken[car_id]
+                    taken.append((now, *receiver.active_command(now)))
+                    v, omega = self.commands[car_id]
+                    while taken and taken[0][0] <= now - delay:  # the wheels follow a command delay late
+                        _, v, omega = taken.popleft()
                     if (v == 0.0 and omega == 0.0) != (self.commands[car_id] == (0.0, 0.0)):
                         command_log.write(self.clock(), car_id, v, omega)
                     self.commands[car_id] = (v, omega)
-                    self.states[car_id] = step(state, v, omega, period, limits, self._rng, self.options.slip)
+                    self.states[car_id] = step(state, v, omega, period, self.vehicles[car_id], self._rng,
+                                               self.options.slip)
                 states = dict(self.states)
                 commands = dict(self.commands)
             if now >= next_truth:
@@ -332,6 +367,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--cut-link", type=parse_window, action="append", default=[],
                         metavar="CAR:START:END", help="car hears no commands in this window (repeatable)")
     parser.add_argument("--slip", type=float, default=0.0, help="relative wheel-speed noise (std)")
+    parser.add_argument("--command-delay", type=float, default=0.0, metavar="S",
+                        help="every car applies a command S seconds after it takes it (default 0)")
+    parser.add_argument("--vehicle", type=parse_vehicle, action="append", default=[], metavar="CAR=FILE",
+                        help="car CAR's body from FILE's [vehicle] table instead of the config's (repeatable)")
     parser.add_argument("--seed", type=int, default=0, help="seed of drops, noise and slip")
     parser.add_argument("--ground-truth", type=Path, default=None, help="write ground truth CSV here")
     parser.add_argument("--command-log", type=Path, default=None,
@@ -350,9 +389,9 @@ def main(argv: list[str] | None = None) -> int:
     for name in ("rate", "physics_hz"):
         if not getattr(args, name) > 0:
             parser.error(f"--{name.replace('_', '-')} must be > 0")
-    for name in ("noise", "latency", "slip"):
+    for name in ("noise", "latency", "slip", "command_delay"):
         if not getattr(args, name) >= 0:
-            parser.error(f"--{name} must be >= 0")
+            parser.error(f"--{name.replace('_', '-')} must be >= 0")
     if not args.relay_stale > 0:
         parser.error("--relay-stale must be > 0")
     options = MocapSimOptions(
@@ -360,7 +399,7 @@ def main(argv: list[str] | None = None) -> int:
         drop_rate=args.drop_rate, noise_m=args.noise, latency_s=args.latency,
         occlusions=tuple(args.occlude), link_cuts=tuple(args.cut_link), slip=args.slip,
         seed=args.seed, ground_truth=args.ground_truth, control_port=args.control_port,
-        command_log=args.command_log)
+        command_log=args.command_log, command_delay_s=args.command_delay, vehicles=tuple(args.vehicle))
 
     def build() -> MocapSim:
         relay = None if args.relay is None else RelayOptions(load_scenario(args.relay).natnet, args.relay_stale)
