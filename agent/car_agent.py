@@ -159,17 +159,14 @@ class CarAgent:
     def gather_evidence(self, now: float) -> None:
         """Safety and consistency evidence about every seen peer, and the audits of their
         plans (rate-limited: agent.witness.Witness)."""
-        self._look(now)
         self.witness.gather(now, self.tracks, self.peers, self.trust, self.counters)
 
     def _look(self, now: float) -> frozenset[int]:
-        """The peers out of sight now (limited sight; none with unlimited sight), told to
-        the trust book: testimonies speak for them (docs/design/trust.md, "Limited sight")."""
+        """The peers out of sight now (limited sight; none with unlimited sight): planned
+        against never as if fully trusted (docs/design/trust.md, "Limited sight")."""
         if not self.trust.limited_sight:
             return frozenset()
-        unseen = out_of_sight(self.tracks, (c.id for c in self.scenario.cars), self.car.id, now)
-        self.trust.see(unseen)
-        return unseen
+        return out_of_sight(self.tracks, (c.id for c in self.scenario.cars), self.car.id, now)
 
     # --- planning ---------------------------------------------------------------------------
 
@@ -450,7 +447,6 @@ class CarAgent:
         return {car_id: m for car_id, m in seen.items() if m is not None}
 
     def trust_message(self, now: float) -> TrustReport:
-        self._look(now)
         report = self.trust.report(self.car.id, self.next_seq("trust"), now, self.epsilon_0, self.scenario.planner.transparency)
         return self.liar.testimony(report) if self.liar is not None else report
 

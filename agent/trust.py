@@ -81,10 +81,9 @@ class TrustBook:
     """The latest testimony of each reporter and when it arrived."""
     limited_sight: bool = False
     """The owner sees only the peers near it (SensingConfig): a testimony that holds no
-    evidence about a peer says nothing of it, and testimonies speak for the peers out of
-    its sight (:meth:`see`). False (the motion capture's view): every peer is seen."""
-    out_of_sight: frozenset = frozenset()
-    """The peers the owner does not see now (limited sight only; :meth:`see`)."""
+    evidence about a peer says nothing of it, and testimonies speak for a peer the owner
+    has seen little of, and nothing bad (docs/design/trust.md, "Limited sight"). False
+    (the motion capture's view): every peer is seen from the start."""
     counters: Counter = field(default_factory=Counter)
     _rejected: dict = field(default_factory=dict, repr=False)
     """(reporter, peer) -> the report (its seq and stamp) last counted as rejected: a
@@ -126,13 +125,6 @@ class TrustBook:
             self.counters[f"failures_{DIMENSIONS[dimension]}"] += 1
 
     # --- testimonies ---------------------------------------------------------------------
-
-    def see(self, out_of_sight: frozenset) -> None:
-        """The peers the owner does not see now (limited sight): testimonies about them
-        may stand in for its own eyes where these hold nothing against them."""
-        if out_of_sight != self.out_of_sight:
-            self.out_of_sight = out_of_sight
-            self._fused.clear()
 
     def receive(self, report: TrustReport, now: float | None = None) -> None:
         """Keep the latest testimony of each reporter (``now``: when it arrived, our clock);
@@ -183,11 +175,11 @@ class TrustBook:
         own_alpha, own_beta = own.alpha.tolist(), own.beta.tolist()
         own_tau, own_amount = own_tau.tolist(), own_amount.tolist()
         checked = [amount >= c.testimony_min_evidence for amount in own_amount]
-        # Limited sight: a peer out of sight, against which our own eyes hold nothing (its
-        # trust not below a stranger's), is believed as its witnesses say, raised or lowered.
+        # Limited sight: where our own eyes have seen little of the peer (less than the
+        # deviation test needs) and nothing bad (its trust not below a stranger's: one
+        # failure is), it is believed as its witnesses say, raised or lowered.
         stranger = (pa + 1.0) / (pa + pb + 2.0)
-        unseen = self.limited_sight and peer in self.out_of_sight
-        may_raise = [unseen and tau >= stranger for tau in own_tau]
+        may_raise = [self.limited_sight and tau >= stranger and not test for tau, test in zip(own_tau, checked)]
         rows = []  # (weight, r, s, left out) per reporter
         for (reporter, seq, stamp), weight, (alphas, betas), age in zip(sources, weights, said, ages):
             r_row, s_row, deviates, silent = [], [], [], []
@@ -215,7 +207,7 @@ class TrustBook:
             surplus = (said_amount - own_amount[d]) / max(said_amount, 1e-12) if said_amount > own_amount[d] else 0.0
             a, b = own_alpha[d] + surplus * r_said, own_beta[d] + surplus * s_said
             if (a + 1.0) / (a + b + 2.0) < own_tau[d] or (may_raise[d] and used):  # lower, never raise: but
-                alpha[d], beta[d] = a, b  # for the unseen, of which our eyes hold nothing bad
+                alpha[d], beta[d] = a, b  # where our eyes hold little, and nothing bad
         return np.array(alpha), np.array(beta)
 
     def discount(self, reporter: int, now: float) -> float:

@@ -429,6 +429,7 @@ STUDIES = {
     "transparency-sweep": ("transparency_sweep", "what trust buys against a liar, against a fleet careful with everyone"),
     "bank": ("bank.runner", "the scenario bank: every scene, many seeds, our pipeline and the baselines"),
     "bank-journals": ("bank.journals", "one table and figure from bank journals as they were recorded"),
+    "testimony": ("testimony", "what testimonies buy cars that see only their neighbours: a liar met after a long approach"),
 }
 """Experiments with their own options (``trustfg experiment NAME --help``): module and what
 it measures; not in "all"."""

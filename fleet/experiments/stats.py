@@ -61,7 +61,9 @@ def rate(flags: Sequence[bool]) -> dict:
 def cell(runs: list[dict]) -> dict:
     """The table's numbers for the runs of one cell (RUN dicts of fleet.experiments.paper)."""
     liar = "liar_id" in runs[0]
-    honest_min = [r["honest_trust_min_after_settle"] for r in runs if r.get("honest_trust_min_after_settle") is not None]
+    # With limited sight (fleet.experiments.testimony), of the peers seen a while: the others are unknown.
+    key = "honest_trust_min_in_sight" if "honest_trust_min_in_sight" in runs[0] else "honest_trust_min_after_settle"
+    honest_min = [r[key] for r in runs if r.get(key) is not None]
     out = {
         "runs": len(runs),
         "breach_seeds_any": sum(1 for r in runs if r["breaches"]),
