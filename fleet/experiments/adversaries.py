@@ -2,7 +2,7 @@
 
     trustfg experiment adversaries [--seeds 50] [--seed 0] [--scenes lab intersection]
                                    [--attacks NAME ...] [--variants on off wide]
-                                   [--held-out intersection-8 --held-out-seeds 20]
+                                   [--held-out intersection-8 --held-out-seeds 20] [--range M]
                                    [--jobs J] [--cluster ADDRESS] [--out DIR]
 
 Per scene, attack (car 1 lies; ``collude``: cars 1 and 3) and seed, the in-process fleet
@@ -10,7 +10,9 @@ runs ``on`` (trust on), ``off`` (the paper's baseline: every plan believed, eps_
 ``wide`` (every plan believed, every peer at eps_0 * g_max), and the honest fleet under
 loss, delay and a skewed clock (``honest-lossy-clock``). Each cell is summarised by
 fleet.experiments.stats.cell with 95 % bootstrap intervals; held-out scenes run ``on``
-only, reported apart. Writes DIR/adversaries/metrics.json and table.md.
+only, reported apart. With ``--range M`` every car sees its peers within M metres only
+(``sensing.range_m``), and false positives count only peers seen a while
+(fleet.experiments.testimony.sight_summary). Writes DIR/adversaries/metrics.json and table.md.
 """
 
 from __future__ import annotations
@@ -35,6 +37,7 @@ from .paper import (
     with_attack,
     write_study,
 )
+from .testimony import sight_summary, with_range
 from .workers import parallel
 
 LIAR = 1
@@ -84,16 +87,17 @@ def run_summary(task: tuple) -> dict:
     """One seed of one fleet, summarised (a RUN dict; the record is dropped to save memory);
     ``task`` ends with the scenario and the seed (what comes before labels it)."""
     *_, scenario, seed = task
-    run, _ = run_one(scenario, seed)
-    return run
+    run, record = run_one(scenario, seed)
+    return run | (sight_summary(scenario, record) if scenario.sensing.range_m is not None else {})
 
 
 def run_matrix(scenes: list[str], attacks: list[str], variants: list[str], seeds: list[int], jobs: int,
-               label: str = "adversaries", cluster: Cluster | None = None) -> dict:
-    """{scene: {attack: {variant: [RUN, ...]}}} over every combination (on ``cluster`` when given)."""
+               label: str = "adversaries", cluster: Cluster | None = None, range_m: float | None = None) -> dict:
+    """{scene: {attack: {variant: [RUN, ...]}}} over every combination (on ``cluster`` when
+    given; every car seeing ``range_m`` when given)."""
     tasks = []
     for scene in scenes:
-        base = load_scenario(scene)
+        base = load_scenario(scene) if range_m is None else with_range(load_scenario(scene), range_m)
         for attack in attacks:
             honest = attack in HONEST
             attacked = HONEST[attack](base) if honest else with_attack(base, ATTACKS[attack])
@@ -111,9 +115,28 @@ def run_matrix(scenes: list[str], attacks: list[str], variants: list[str], seeds
 
 
 def summarise(results: dict) -> dict:
-    return {scene: {attack: {variant: stats.cell(runs) for variant, runs in by_variant.items()}
+    return {scene: {attack: {variant: cell(runs) for variant, runs in by_variant.items()}
                     for attack, by_variant in by_attack.items()}
             for scene, by_attack in results.items()}
+
+
+def cell(runs: list[dict]) -> dict:
+    """stats.cell, and with limited sight the longest time an honest car's trust in an
+    honest peer it had seen a while stayed below stats.FALSE_POSITIVE_TRUST, and the liars
+    seen lying that were trusted again out of sight (fleet.experiments.testimony)."""
+    out = stats.cell(runs)
+    if "honest_low_in_sight_s" in runs[0]:
+        out |= {"honest_low_in_sight_s_max": max(r["honest_low_in_sight_s"] for r in runs),
+                "liar_cleared_unseen": sum(r["liar_cleared_unseen"] for r in runs)}
+    return out
+
+
+def _false_positives(c: dict) -> str:
+    text = stats.show(c["false_positive_rate"], 0, True)
+    if "honest_low_in_sight_s_max" in c:
+        text += f" (in sight; below {stats.FALSE_POSITIVE_TRUST:g} at most {c['honest_low_in_sight_s_max']:.1f} s"
+        text += f"; liars seen lying trusted again unseen: {c['liar_cleared_unseen']})"
+    return text
 
 
 def table(summary: dict, title: str) -> str:
@@ -127,7 +150,7 @@ def table(summary: dict, title: str) -> str:
                 if "breach_rate" not in c:  # an honest fleet: any breach, no detection
                     rows.append([scene, attack, variant, f"{c['breach_seeds_any']}/{c['runs']} (any pair)",
                                  f"{c['min_clearance_m']:.3f}", "-", "-", "-",
-                                 stats.show(c["false_positive_rate"], 0, True), makespan])
+                                 _false_positives(c), makespan])
                     continue
                 never = f" ({c['never_detected']} never)" if c["never_detected"] else ""
                 rows.append([scene, attack, variant,
@@ -135,7 +158,7 @@ def table(summary: dict, title: str) -> str:
                              f"{c['min_clearance_m']:.3f}", stats.show(c["detected_3s_rate"], 0, True)
                              + (f" ({c['withdrawn']} withdrawn)" if c.get("withdrawn") else ""),
                              stats.show(c.get("detected_3s_told_rate"), 0, True), stats.show(c["detection_s"], 1) + never,
-                             stats.show(c["false_positive_rate"], 0, True), makespan])
+                             _false_positives(c), makespan])
     return stats.markdown(title, ["scene", "attack", "fleet", "honest-liar breaches (seeds)", "least clearance (m)",
                                   "detected within 3 s of the first lie due",
                                   "... of the first lie told", "detection (s), median", "false positives",
@@ -153,20 +176,25 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--held-out", nargs="*", default=["intersection-8"],
                         help="scenes run with trust on only and reported apart (default: intersection-8)")
     parser.add_argument("--held-out-seeds", type=int, default=20, help="seeds per held-out cell (default 20)")
+    parser.add_argument("--range", type=float, default=None, dest="range_m",
+                        help="every car sees its peers within this many metres only (default: everywhere)")
     args = parser.parse_args(argv)
     if args.seeds < 1 or args.held_out_seeds < 1:
         parser.error("--seeds and --held-out-seeds must be at least 1")
     for scene in args.scenes + args.held_out:
-        configured("trustfg experiment adversaries", lambda: load_scenario(scene))
+        configured("trustfg experiment adversaries",
+                   lambda: load_scenario(scene) if args.range_m is None else with_range(load_scenario(scene),
+                                                                                        args.range_m).validate())
     out = study_folder(args.out, "adversaries")
     started = time.perf_counter()
     seeds = list(range(args.seed, args.seed + args.seeds))
     held = list(range(args.seed, args.seed + args.held_out_seeds))
     try:
         with cluster_at(args.cluster, args.jobs) as cluster:
-            results = run_matrix(args.scenes, args.attacks, args.variants, seeds, args.jobs, cluster=cluster)
+            results = run_matrix(args.scenes, args.attacks, args.variants, seeds, args.jobs, cluster=cluster,
+                                 range_m=args.range_m)
             held_results = run_matrix(args.held_out, args.attacks, ["on"], held, args.jobs, "held-out",
-                                      cluster) if args.held_out else {}
+                                      cluster, args.range_m) if args.held_out else {}
     except ClusterError as exc:
         print(f"trustfg experiment adversaries: {exc}", file=sys.stderr)
         return 2
@@ -176,7 +204,10 @@ def main(argv: list[str] | None = None) -> int:
               "summary": summarise(results), "held_out": summarise(held_results),
               "runs": results, "held_out_runs": held_results,
               "wall_time_s": round(time.perf_counter() - started, 1)}
-    text = table(report["summary"], f"{len(seeds)} seeds per cell")
+    if args.range_m is not None:
+        report["range_m"] = args.range_m
+    within = "" if args.range_m is None else f", sensing range {args.range_m:g} m"
+    text = table(report["summary"], f"{len(seeds)} seeds per cell{within}")
     if held_results:
         text += "\n" + table(report["held_out"], f"held out: trust on, {len(held)} seeds per cell")
     write_study(out, report, text)
