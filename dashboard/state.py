@@ -10,6 +10,9 @@ than their breach distance now), ``low_trust`` (a car's trust in a peer below
 process left the bus), ``lost_pose`` (a car does not see itself, or its pose is older than
 ``LOST_POSE_AFTER_S``) and ``clock`` (a car's clock more than ``CLOCK_ALERT_S`` off, the
 median of its peers' estimates: its plans are still corrected, but its NTP needs a look).
+With a sensing range (SensingConfig) it also shows who sees whom, from the poses and each
+car's range, and for every trust a car reports whether its own eyes or its witnesses'
+testimonies set it (:func:`trust_source`).
 """
 
 from __future__ import annotations
@@ -22,7 +25,9 @@ import numpy as np
 from matplotlib.colors import to_hex
 
 from ..agent import messages, metrics
-from ..agent.config import Scenario
+from ..agent.config import Scenario, TrustConfig
+from ..agent.sight import in_sight
+from ..agent.world import build_sdf
 
 RATE_WINDOW_S = 2.0
 STALE_AFTER_S = 1.5
@@ -57,6 +62,18 @@ class CarView:
     arrivals: dict[str, deque] = field(default_factory=lambda: defaultdict(deque))
 
 
+def trust_source(entry: messages.PeerTrust, config: TrustConfig) -> str:
+    """Where a reported trust came from: ``"witnesses"`` where testimonies moved it off
+    the reporter's own evidence (the report's tau is fused, its alpha and beta are the
+    reporter's own: agent.trust.TrustBook.report), else ``"own"``, or ``"none"`` with no
+    evidence of its own at all (a stranger's prior)."""
+    pa, pb = config.prior_alpha, config.prior_beta
+    own = [(a + pa + 1.0) / (a + b + pa + pb + 2.0) for a, b in zip(entry.alpha, entry.beta)]
+    if any(abs(fused - mine) > 1e-3 for fused, mine in zip(entry.tau, own)):
+        return "witnesses"
+    return "own" if sum(entry.alpha) + sum(entry.beta) > 0.0 else "none"
+
+
 def plan_outcomes(status: messages.StatusMessage | None) -> dict[str, int] | None:
     """How the car's replans ended (verified first try, on retry, fallbacks, kept) and its
     deadlocks and steps aside, from the counters of its status (agent.safe_plan,
@@ -86,6 +103,10 @@ class FleetView:
         """(n, n) centre distance below which each pair breaches, in ``ids`` order."""
         self._index = {car_id: i for i, car_id in enumerate(self.ids)}
         self.messages = 0
+        self.ranges = {c.id: scenario.sensing_range(c) for c in scenario.cars}
+        """Each car's sensing range, m (inf: it sees every peer)."""
+        self.limited = any(math.isfinite(r) for r in self.ranges.values())
+        self._walls = build_sdf(scenario.world) if self.limited and scenario.sensing.line_of_sight else None
 
     # --- inputs ----------------------------------------------------------------------------
 
@@ -141,6 +162,21 @@ class FleetView:
         seen = {cid: (c.pose.x, c.pose.y) for cid, c in self.cars.items()
                 if c.pose is not None and c.pose.valid and self.now - c.pose_at <= LOST_POSE_AFTER_S}
         return {(a, b): math.dist(seen[a], seen[b]) for a in seen for b in seen if a < b}
+
+    def sight_now(self) -> list[list[int]] | None:
+        """[a, b] for every car a that sees car b now, from their fresh poses and a's range
+        (and the walls, with line of sight); None when every car sees every peer."""
+        if not self.limited:
+            return None
+        seen = {cid: (c.pose.x, c.pose.y) for cid, c in self.cars.items()
+                if c.pose is not None and c.pose.valid and self.now - c.pose_at <= LOST_POSE_AFTER_S}
+        pairs = []
+        for a, where in seen.items():
+            others = [b for b in seen if b != a]
+            if others:
+                mask = in_sight(where, np.array([seen[b] for b in others]), self.ranges[a], self._walls)
+                pairs += [[a, b] for b, ok in zip(others, mask) if ok]
+        return sorted(pairs)
 
     def clock_offset(self, car_id: int) -> float | None:
         """The median of the peers' estimates of ``car_id``'s clock offset (seconds), from the
@@ -213,13 +249,14 @@ class FleetView:
             report = self.cars[cid].trust
             if report is not None:
                 trust[str(cid)] = {str(peer): {"trust": round(pt.trust, 4), "tau": [round(x, 4) for x in pt.tau],
-                                               "epsilon": round(pt.epsilon, 4)}
+                                               "epsilon": round(pt.epsilon, 4),
+                                               "source": trust_source(pt, self.scenario.trust)}
                                    for peer, pt in report.peers.items()}
         matrix = [[None if not math.isfinite(x) else round(float(x), 4) for x in row] for row in self.min_distance]
         return {
             "type": "snapshot", "t": self.now, "cars": cars, "trust": trust,
             "min_distance": {"ids": self.ids, "matrix": matrix, "source": self.distance_source},
-            "alerts": self.alerts(), "messages": self.messages,
+            "alerts": self.alerts(), "messages": self.messages, "sight": self.sight_now(),
         }
 
     def map(self) -> dict:
@@ -232,4 +269,5 @@ class FleetView:
             "cars": [{"id": c.id, "color": self.cars[c.id].color, "goal": list(c.goal), "start": list(c.start),
                       "radius": c.radius_m} for c in self.scenario.cars],
             "breach_distance": self.breach_distance.round(4).tolist(), "low_trust": LOW_TRUST,
+            "sensing_range": {str(cid): (r if math.isfinite(r) else None) for cid, r in self.ranges.items()},
         }

@@ -38,7 +38,7 @@ function drawMap(m) {
       el("polygon", {points: o.points.map(p => p.join(",")).join(" "), fill: "#90a4ae", class: "obstacle"}, world);
     }
   }
-  for (const name of ["plans", "goals", "epsilon", "cars"]) layers[name] = el("g", {id: `layer-${name}`}, world);
+  for (const name of ["sight", "plans", "goals", "epsilon", "cars"]) layers[name] = el("g", {id: `layer-${name}`}, world);
   for (const c of m.cars) {
     const goal = el("path", {d: star(c.goal[0], c.goal[1], 0.09), fill: c.color, opacity: 0.8,
                              class: "goal", "data-car": c.id}, layers.goals);
@@ -97,11 +97,28 @@ function draw() {
     shape.plan.setAttribute("points", car.plan ? car.plan.map(p => p.join(",")).join(" ") : "");
     shape.body.setAttribute("stroke-width", selected === car.id ? 0.04 : 0.01);
   }
+  renderSight(s);
   renderEpsilon(s);
   renderAlerts(s.alerts);
   renderTrust(s);
   renderDistances(s.min_distance);
   renderCars(s.cars);
+}
+
+// With a sensing range: a thin line from each car to every peer it sees (both ways: solid;
+// one way, a car with the longer range: dashed). Nothing without a range: all see all.
+function renderSight(s) {
+  layers.sight.replaceChildren();
+  if (!s.sight) return;
+  const at = Object.fromEntries(s.cars.filter(c => c.pose).map(c => [c.id, c.pose]));
+  const pairs = new Set(s.sight.map(([a, b]) => `${a},${b}`));
+  for (const [a, b] of s.sight) {
+    const both = pairs.has(`${b},${a}`);
+    if ((both && a > b) || !at[a] || !at[b]) continue;
+    el("line", {x1: at[a].x, y1: at[a].y, x2: at[b].x, y2: at[b].y, stroke: "#78909c", "stroke-width": 0.01,
+                "stroke-dasharray": both ? "" : "0.04 0.03", class: "sight", "data-cars": `${a},${b}`},
+       layers.sight);
+  }
 }
 
 function renderEpsilon(s) {
@@ -152,8 +169,11 @@ function renderTrust(s) {
     const a = cell.dataset.truster, b = cell.dataset.trustee;
     const entry = (s.trust[a] || {})[b];
     if (a === b) { cell.textContent = "·"; continue; }
-    cell.textContent = entry ? entry.trust.toFixed(2) : "–";
+    cell.textContent = entry ? entry.trust.toFixed(2) + (entry.source === "witnesses" ? "*" : "") : "–";
     cell.dataset.trust = entry ? entry.trust : "";
+    cell.dataset.source = entry ? entry.source : "";
+    cell.title = entry ? {own: "from its own eyes", witnesses: "witnesses' testimonies moved it (*)",
+                          none: "no evidence yet: a stranger"}[entry.source] || "" : "";
     cell.classList.toggle("low", !!entry && entry.trust < map.low_trust);
   }
   renderDrill();
@@ -166,7 +186,9 @@ function renderDrill() {
   box.hidden = false;
   box.textContent = entry
     ? `car ${drill[0]} → car ${drill[1]}: safety ${entry.tau[0].toFixed(2)}, consistency ${entry.tau[1].toFixed(2)}, ` +
-      `transparency ${entry.tau[2].toFixed(2)}; overall ${entry.trust.toFixed(2)}; keeps ε = ${entry.epsilon.toFixed(2)} m`
+      `transparency ${entry.tau[2].toFixed(2)}; overall ${entry.trust.toFixed(2)}; keeps ε = ${entry.epsilon.toFixed(2)} m; ` +
+      {own: "from its own eyes", witnesses: "testimonies moved it", none: "no evidence yet"}[entry.source] +
+      (latest.sight ? (latest.sight.some(([a, b]) => a === drill[0] && b === drill[1]) ? ", in sight" : ", out of sight") : "")
     : `car ${drill[0]} has not reported on car ${drill[1]} yet`;
 }
 
