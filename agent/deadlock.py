@@ -326,11 +326,18 @@ def _first_clear(position: np.ndarray, away: np.ndarray, turns: tuple[float, ...
 
 def _way_to(position: np.ndarray, goal: np.ndarray, steering: tuple[float, float] | None) -> np.ndarray:
     """Points of the way from ``position`` to ``goal``: straight, or with a car-like car's
-    ``steering`` (heading, turning radius) its departure arc, then straight."""
+    ``steering`` (heading, turning radius) its departure arc, then straight, then on as
+    far again as the car's turning circle is wide -- a car that cannot turn standing needs
+    that room ahead of where it stops to drive anywhere from there."""
     start = position
     arc = np.zeros((0, 2))
     if steering is not None:
         arc = departure_arc(position, steering[0], goal, steering[1])
         if len(arc):
             start = arc[-1]
-    return np.vstack([arc, start + np.linspace(0.0, 1.0, SEGMENT_SAMPLES)[1:, None] * (goal - start)])
+    way = np.vstack([arc, start + np.linspace(0.0, 1.0, SEGMENT_SAMPLES)[1:, None] * (goal - start)])
+    length = float(np.linalg.norm(goal - start))
+    if steering is None or length < 1e-9:
+        return way
+    ahead = goal + np.linspace(0.0, 2.0 * steering[1], SEGMENT_SAMPLES)[1:, None] * (goal - start) / length
+    return np.vstack([way, ahead])
