@@ -210,7 +210,7 @@ def table(summary: dict, range_m: float, seeds: int) -> str:
 def main(argv: list[str] | None = None) -> int:
     parser = command_parser("trustfg experiment testimony", __doc__)
     study_options(parser, seeds=50)
-    parser.add_argument("--range", type=float, default=RANGE_M, dest="range_m",
+    parser.add_argument("--range", type=float, default=RANGE_M, dest="range_m", metavar="M",
                         help=f"every car's sensing range, m (default {RANGE_M})")
     parser.add_argument("--scenes", nargs="+", default=list(SCENES), help=f"scenes (default: {' '.join(SCENES)})")
     args = parser.parse_args(argv)
