@@ -87,7 +87,8 @@ class TrackingConfig:
     derives the judge's from it)."""
     turn_first_deg: float = 60.0
     """A car facing further than this from where its plan goes turns on the spot before it
-    drives (after a stop, say); its peers expect that of it (agent.consistency)."""
+    drives (after a stop, say), or drives on at full lock if it is car-like; its peers
+    expect that of it (agent.consistency)."""
 
     def turns_first(self, heading_error_rad: float) -> bool:
         """Does a car this far (wrapped to [-pi, pi]) from its plan's direction turn on the
@@ -152,7 +153,8 @@ class ControlConfig:
     """How many times a car drives its route: lap 2 goes back from the goal to the start,
     lap 3 out again, ... (a long run for soak tests; 1 in the lab)."""
     lap_turn_s: float = 2.0
-    """Between laps a car turns in place towards its next leg for this long, then drives."""
+    """Between laps a car turns in place towards its next leg for this long, then drives (a
+    car-like car stands this long: its next plan turns it round as it drives)."""
     trust_report_period_s: float = 0.5
     """How often a car publishes its trust report: its direct evidence about every peer,
     the testimony its peers fuse."""
