@@ -1,6 +1,6 @@
 """The in-process fleet at scale: simulated seconds per wall second, and the outcome.
 
-    python benchmarks/bench_fleet.py SCENE [SCENE ...] [--seeds 1]
+    python benchmarks/bench_fleet.py SCENE [SCENE ...] [--seeds 1] [--trust-record]
 
 Runs the deterministic in-process fleet (fleet.sim.in_process: every car's agent, planner and
 trust, message codec and inboxes, unicycles and tracking, in one process) on each scene
@@ -8,7 +8,10 @@ to completion (every car at its goal) or the scene's timeout, and prints per run
 simulated time, wall time, speed (simulated seconds per wall second, and per CPU second of
 this process: steadier on a shared machine), breaches, the least
 clearance, whether every car arrived, the replan time median / p95 and how many of the
-peers the planners left out as out of reach. A 32-car scene:
+peers the planners left out as out of reach. The fleet runs as the scenario bank runs it:
+without the paper's experiments' sample of every car's trust in every peer every 0.1 s
+(``--trust-record`` adds it; O(cars^2) fusions, bookkeeping of the experiment rather than
+work of a car). A short unmeasured run first compiles the kernels. A 32-car scene:
 
     trustfg scenario generate --kind circle --cars 32 --seed 1 --out circle-32.toml
     python benchmarks/bench_fleet.py circle-32.toml
@@ -31,15 +34,19 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("scenes", nargs="+", help="shipped scene names or files")
     parser.add_argument("--seeds", type=int, default=1, help="seeds 0..N-1 per scene (default %(default)s)")
+    parser.add_argument("--trust-record", action="store_true",
+                        help="also sample every car's trust in every peer, as the paper's experiments do")
     args = parser.parse_args()
     print(f"{'scene':>12} {'seed':>4} {'cars':>4} {'sim s':>6} {'wall s':>7} {'sim/wall':>8} {'sim/cpu':>7} {'breaches':>8} "
           f"{'clear m':>7} {'arrived':>7} {'replan ms med/p95':>18} {'out of reach':>12}")
+    warm = load_scenario("intersection")
+    simulate(warm, 1000, build_sdf(warm.world), record_trust=args.trust_record)  # numba's kernels compiled
     for name in args.scenes:
         scenario = load_scenario(name)
         sdf = build_sdf(scenario.world)
         for seed in range(args.seeds):
             started, started_cpu = time.perf_counter(), time.process_time()
-            record = simulate(scenario, seed, sdf)
+            record = simulate(scenario, seed, sdf, record_trust=args.trust_record)
             wall, cpu = time.perf_counter() - started, time.process_time() - started_cpu
             summary = motion_summary(scenario, record, sdf)
             replans = np.concatenate([np.asarray(r, dtype=float) for r in record.replan_ms])
