@@ -36,7 +36,7 @@ def test_the_way_to_a_detour_is_the_departure_arc_then_straight_and_room_beyond(
 def test_a_car_like_car_never_gives_way_nose_first_into_a_wall(pocket):
     """Away from a car that goes first coming from the west is east, towards the wall 0.9 m
     off: a unicycle takes the point 0.6 m east (it turns on the spot once there); a car-like
-    car facing north would stop 0.3 m from the wall facing it, so it takes another point,
+    car facing north would end 0.3 m short of the wall facing it, so it takes another point,
     whose arc and the room beyond keep clear of the walls."""
     position = np.array([0.0, 0.0])
     ways = [np.array([[-1.0, 0.0], [-2.0, 0.0]])]
