@@ -178,6 +178,9 @@ def run(intersection, tmp_path_factory):
                 time.sleep(0.05)
             states = fleet.states()
             watch.poll()
+            # The dashboard hears the same statuses over its own session: give it a moment.
+            wait_for(lambda: all(car["pose"]["valid"] and car["state"] == "arrived"
+                                 for car in snapshot(dashboard)["cars"]), 5.0)
             seen = snapshot(dashboard)
             fleet.processes.stop(["motive"])  # Motive (and car 1 with it) goes quiet
             lost = wait_for(lambda: any(a["kind"] == "lost_pose" and a["cars"] == [1]
