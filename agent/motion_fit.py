@@ -51,3 +51,8 @@ def quadratic_fit(times: np.ndarray, xy: np.ndarray, t_last: float) -> np.ndarra
         out[1, col] = d1 - 2.0 * d2 * mean
         out[2, col] = 2.0 * d2
     return out
+
+
+def warm() -> None:
+    """Compile (or load from the cache) before the first sighting needs it."""
+    quadratic_fit(np.array([0.0, 0.1, 0.2]), np.zeros((3, 2)), 0.2)

@@ -27,7 +27,7 @@ import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import V, X
 
-from . import factors, follower, gaps, interpolate, interval_kernel
+from . import factors, follower, gaps, interpolate, interval_kernel, motion_fit
 from .config import PlannerConfig
 from .gp import Plan, interpolation_weights
 from .heading_factors import add_heading_factors, insert_headings
@@ -366,10 +366,12 @@ def _check_request(request: PlanRequest) -> None:
 
 
 def warm_compiled() -> None:
-    """Compile, or load from numba's cache, the planner's compiled loops (agent.interval_kernel,
-    agent.interpolate, and verification's agent.follower and agent.gaps) -- once before many processes
-    start, or before a car's first replan."""
+    """Compile, or load from numba's cache, a car's mind's compiled loops (the planner's
+    agent.interval_kernel and agent.interpolate, verification's agent.follower and agent.gaps,
+    and the peers' track fit agent.motion_fit) -- once before many processes start, or before a
+    car's first replan."""
     interval_kernel.warm()
     interpolate.warm()
     follower.warm()
     gaps.warm()
+    motion_fit.warm()

@@ -224,7 +224,7 @@ class CarProcess:
         log.info("car %d: NatNet %s at %s, link %s (version %d)", car.id, scenario.natnet.mode, scenario.natnet.server,
                  car.link, car.link_version)
         self.command.start()  # STOP to the car from its first tick, whatever else is not up yet
-        warm_compiled()  # the planner's compiled loops loaded now, not in the first replan
+        warm_compiled()  # the mind's compiled loops loaded now, not in its first replan or sighting
         connector = threading.Thread(target=self._connect_natnet, name=f"natnet-connect-{car.id}", daemon=True)
         connector.start()
         bus = None
