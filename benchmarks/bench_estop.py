@@ -1,6 +1,6 @@
 """E-stop latency in ``trustfg sim``: from ``trustfg stop`` to every car applying zero.
 
-    python benchmarks/bench_estop.py [--stops 20] [--bus-stops 5] [--session-stops 5] [--seed 0] [--out FILE]
+    python benchmarks/bench_estop.py [--rounds 20] [--bus-rounds 5] [--session-rounds 5] [--seed 0] [--out FILE]
 
 Runs ``trustfg sim --stay`` with four cars and joins its bus as the operator. Each round
 starts a trial, waits a random moment while the cars drive (U(1, 4) s after the departure,
@@ -8,8 +8,8 @@ from ``--seed``), runs ``trustfg stop`` as a fresh process and times from just b
 start until every moving car applies zero for good (mocap-sim's command log, 5 ms ticks);
 every car must then hold for a second; release; back to the starts. Every fourth round
 freezes the car processes (SIGSTOP) first and stops with ``--path link`` alone; resumed,
-they command motion again and the cars must still hold. ``--bus-stops`` rounds use the bus
-path alone, ``--session-stops`` rounds the benchmark's own operator session (as ``trustfg
+they command motion again and the cars must still hold. ``--bus-rounds`` use the bus
+path alone, ``--session-rounds`` use the benchmark's own operator session (as ``trustfg
 go``'s stop key does). Results: docs/results/performance.md#e-stop.
 """
 
@@ -131,10 +131,10 @@ def summary(rows: list[dict]) -> dict:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--stops", type=int, default=20, help="stops with trustfg stop's default (both paths)")
-    parser.add_argument("--bus-stops", type=int, default=5, help="stops on the bus path alone")
-    parser.add_argument("--session-stops", type=int, default=5,
-                        help="stops from a running operator's session (go's key, the dashboard's button)")
+    parser.add_argument("--rounds", type=int, default=20, help="e-stop rounds with trustfg stop's default (both paths)")
+    parser.add_argument("--bus-rounds", type=int, default=5, help="e-stop rounds on the bus path alone")
+    parser.add_argument("--session-rounds", type=int, default=5,
+                        help="e-stop rounds from a running operator's session (go's key, the dashboard's button)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the random moments")
     parser.add_argument("--out", type=Path, default=None, help="write every stop as JSON here")
     args = parser.parse_args()
@@ -158,8 +158,8 @@ def main() -> int:
         operator.wait_states({"waiting"}, 10.0)
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
             s.sendto(b'{"reset": true}', ("127.0.0.1", control_port))
-        plan = ([("both", k % 4 == 3) for k in range(args.stops)] + [("bus", False)] * args.bus_stops
-                + [("session", False)] * args.session_stops)
+        plan = ([("both", k % 4 == 3) for k in range(args.rounds)] + [("bus", False)] * args.bus_rounds
+                + [("session", False)] * args.session_rounds)
         for k, (path, pause) in enumerate(plan):
             row = one_stop(run, CommandLog(run / "commands.csv"), operator, ids, float(rng.uniform(1.0, 4.0)),
                            "link" if pause else path, pause, control_port)

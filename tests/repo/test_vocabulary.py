@@ -11,11 +11,13 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
 
-INTERNAL = re.compile(r"stop [0-9]+|sitting|quick hour|issue [0-9]+|x frozen", re.IGNORECASE)
-"""Words that mean something only to the people who organised the work."""
+INTERNAL = re.compile(r"s[t]op [0-9]+|s[i]tting|quick h[o]ur|i[s]sue [0-9]+|x f[r]ozen", re.IGNORECASE)
+"""Words that mean something only to the people who organised the work. One letter of each
+stands in brackets, so that this file does not match its own patterns."""
 
-ITERATION_NAME = re.compile(r"(stop|sitting|round|iteration|take)[-_]?[0-9]+|[a-z][-_][0-9]{2}\b", re.IGNORECASE)
-"""A file name that counts iterations (bank-stop-18.md)."""
+ITERATION_NAME = re.compile(r"(s[t]op|s[i]tting|round|iteration|take)[-_]?[0-9]+|[a-z][-_][0-9]{2}\b",
+                            re.IGNORECASE)
+"""A file name that counts iterations (bank-round-3.md, results-v-18.md)."""
 
 COMMIT = re.compile(r"(?<![0-9a-zA-Z_/#.-])(?=[0-9a-f]*[a-f])(?=[0-9a-f]*[0-9])[0-9a-f]{7,12}(?![0-9a-zA-Z_-])")
 """A short commit hash: 7-12 hex digits with letters and digits, standing alone."""
@@ -49,8 +51,6 @@ def text_of(name: str) -> str | None:
 def test_no_internal_vocabulary_anywhere():
     found = []
     for name in tracked():
-        if name == "tests/repo/test_vocabulary.py":
-            continue
         text = text_of(name)
         for number, line in enumerate((text or "").splitlines(), 1):
             if INTERNAL.search(line):
