@@ -276,15 +276,20 @@ class FleetBus:
                     ", ".join(map(str, cars)), quiet_s, "their" if len(cars) > 1 else "its", kind,
                     f" (car{'s' if len(on_nothing) > 1 else ''} {', '.join(map(str, on_nothing))} heard on "
                     f"nothing; links: {self._links_said()})" if on_nothing else "")
-            try:
-                self._subscribers[kind].undeclare()
-            except Exception as exc:  # already gone: declare anew all the same
-                log.debug("undeclare %s: %s", kind, exc)
-            try:
-                self._subscribers[kind] = self._subscribe(kind)
-                self.counters[f"resubscribed_{kind}"] += 1
-            except Exception as exc:  # a closing session: nothing to watch any more
-                log.warning("subscribing to %s again failed: %s", kind, exc)
+            self.subscribe_again(kind)
+
+    def subscribe_again(self, kind: str) -> None:
+        """Declare the subscription of car kind ``kind`` anew (counted: ``resubscribed_<kind>``):
+        the mend for a declaration Zenoh lost on the way to a peer (see :func:`silent_kinds`)."""
+        try:
+            self._subscribers[kind].undeclare()
+        except Exception as exc:  # already gone: declare anew all the same
+            log.debug("undeclare %s: %s", kind, exc)
+        try:
+            self._subscribers[kind] = self._subscribe(kind)
+            self.counters[f"resubscribed_{kind}"] += 1
+        except Exception as exc:  # a closing session: nothing to watch any more
+            log.warning("subscribing to %s again failed: %s", kind, exc)
 
     def _watch_deafness(self, heard: dict[tuple[int, str], float], alive: dict[int, bool], now: float) -> None:
         """Nothing from any live car for DEAF_S: a deaf spell, counted (``deaf_spells``,

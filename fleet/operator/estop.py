@@ -13,6 +13,7 @@ and exits with 1 when a named car confirmed on neither.
 from __future__ import annotations
 
 import argparse
+import logging
 import sys
 import time
 from typing import TYPE_CHECKING, Callable
@@ -24,8 +25,12 @@ if TYPE_CHECKING:
     from ...agent.config import Scenario
     from .estop_direct import LinkStopper
 
+log = logging.getLogger(__name__)
+
 BUS_JOIN_S = 1.0
 """A release or an abort waits up to this long for the car processes to be seen on the bus."""
+ASK_AGAIN_PERIODS = 1.5
+"""Status periods after which a car not heard since the message went out is asked again."""
 
 CONFIRMED = {"estop": lambda state: state == "e_stopped", "release": lambda state: state not in ("e_stopped", ""),
              "abort": lambda state: state not in ("driving", "stuck", "")}
@@ -102,9 +107,21 @@ def _on_the_bus(fleet: "Scenario", cars: list[int], action: str, args: argparse.
         published = time.time()
         inbox = messages.Inbox()
         deadline = time.monotonic() + max(args.wait, args.repeat)
+        # A car tells its mode at once and then every status period: a car not heard by
+        # ASK_AGAIN_PERIODS of them most often never got our status subscription (Zenoh
+        # now and then loses a declaration between peers that open at once), so declare it
+        # again rather than wait out the bus's own SILENT_S watch.
+        ask_again_s = ASK_AGAIN_PERIODS * fleet.control.status_period_s
+        next_ask = time.monotonic() + ask_again_s
         next_ping = 0.0
         while time.monotonic() < deadline:
             now = time.time()
+            if bus is not None and time.monotonic() >= next_ask:
+                next_ask = time.monotonic() + ask_again_s
+                unheard = [car for car in cars if not seen[car]]
+                if unheard:
+                    log.info("no status yet from cars %s: subscribing to status again", " ".join(map(str, unheard)))
+                    bus.subscribe_again("status")
             if stopper is not None:
                 if action == "release" and time.monotonic() >= next_ping:
                     next_ping = time.monotonic() + 0.1

@@ -331,6 +331,31 @@ def test_a_subscription_zenoh_lost_is_declared_again(watching, monkeypatch):
         assert one.counters["resubscribed_status"] == (1 if watching else 0)
 
 
+def test_a_process_that_asks_for_a_kind_again_hears_it_at_once(monkeypatch):
+    """``trustfg stop`` cannot wait out the watch's silence for a car's status: it declares
+    the subscription again itself (fleet.operator.estop), and the status comes back."""
+    status = status_of(2)
+    with two_cars_watched(monkeypatch, math.inf) as (one, two):  # no watch: only the ask mends it
+
+        def heard_status(within_s: float) -> bool:
+            deadline = time.monotonic() + within_s
+            while time.monotonic() < deadline:
+                two.publish("status", status)
+                if any(r.kind == "status" for r in one.drain()):
+                    return True
+                time.sleep(0.05)
+            return False
+
+        assert heard_status(5.0)
+        one._subscribers["status"].undeclare()  # lost, as Zenoh lost it
+        time.sleep(0.3)
+        one.drain()
+        assert not heard_status(1.0)
+        one.subscribe_again("status")
+        assert heard_status(2.0)
+        assert one.counters["resubscribed_status"] == 1
+
+
 def test_poses_lost_while_the_car_is_heard_come_back_within_seconds(monkeypatch):
     """A FREQUENT kind (poses here, plans in a car) lost while the car's status still
     arrives is declared again by BEHIND_S's rule alone (SILENT_S's is off)."""
