@@ -349,8 +349,7 @@ class CarAgent:
         safety, r = self.scenario.safety, self.car.radius_m
         blockers = frozenset(self.last_outcome.blocked_by) if self.last_outcome else frozenset()
         detour = self.deadlock.goal(now, position, np.asarray(self.car.goal, float), seen, now >= self.depart_at,
-                                    safety.epsilon_0(r, r), self.sdf, safety.epsilon_obstacle(r), blockers, steering,
-                                    np.asarray(self.car.route, float).reshape(-1, 2))
+                                    safety.epsilon_0(r, r), self.sdf, safety.epsilon_obstacle(r), blockers, steering)
         for name, count in (("deadlocks", self.deadlock.deadlocks), ("deadlock_yields", self.deadlock.yields)):
             if count:
                 self.counters[name] = count

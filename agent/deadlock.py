@@ -10,10 +10,7 @@ a stuck peer in steps aside (:meth:`DeadlockWatch.step_aside`) until the peer ha
 
 A car-like car (VehicleConfig.steering = "car") passes its heading and turning radius:
 its way to a detour is the arc that turns it there (agent.steering.departure_arc), not a
-turn on the spot, and that arc must keep clear of the walls. So must its way on: from
-the detour, facing the way it arrived, the arc that turns it back onto its own way (the
-next point of its route, or its goal) -- a car that cannot turn standing or reverse and
-gives way into a pocket it cannot turn out of stands there for good.
+turn on the spot, and that arc must keep clear of the walls.
 
 Pure: the caller passes the time and what its car sees. docs/design/safety.md,
 "Deadlocks".
@@ -99,8 +96,7 @@ class DeadlockWatch:
 
     def goal(self, now: float, position: np.ndarray, goal: np.ndarray, peers: dict[int, PeerSeen], departed: bool,
              keep_clear: float, sdf: SignedDistanceField, wall_clear: float,
-             blockers: frozenset[int] = frozenset(), steering: tuple[float, float] | None = None,
-             route: np.ndarray | None = None) -> np.ndarray | None:
+             blockers: frozenset[int] = frozenset(), steering: tuple[float, float] | None = None) -> np.ndarray | None:
         """Record what we see now; the detour goal to plan to while we give way, else None.
 
         ``blockers``: peers our last plans failed verification against (they belong to
@@ -108,9 +104,7 @@ class DeadlockWatch:
         ``keep_clear``: how far a detour goal must stay from every car we see (centres);
         ``wall_clear``: from every wall (centre to surface), along the way there too;
         ``steering``: a car-like car's (heading, turning radius), whose way there turns
-        on that radius (None: a car that turns in place goes straight); ``route``: its
-        way to ``goal`` (k, 2), which a car-like car's detour must let it turn back onto
-        (None: ``goal`` alone)."""
+        on that radius (None: a car that turns in place goes straight)."""
         if self.detour is not None:
             if now < self.detour.until or self._still_needed(now, peers, keep_clear, sdf, wall_clear):
                 return self.detour.goal
@@ -131,9 +125,8 @@ class DeadlockWatch:
         first = [cid for cid in group if goes_first(peers[cid].deadlocks, cid, self.been_through, self.car_id)]
         if not first or not self.config.enabled:
             return None  # we go first (or resolution is off): keep trying for the goal
-        onward = np.vstack([route, goal]) if route is not None and len(route) else goal[None, :]
         goal = detour_goal(position, [_way(peers[cid]) for cid in first], _everyone(peers), self.config.detour_m,
-                           keep_clear, sdf, wall_clear, steering, onward)
+                           keep_clear, sdf, wall_clear, steering)
         if goal is None:
             return None
         self.detour = Detour(goal, now + self.config.yield_s)
@@ -168,7 +161,7 @@ class DeadlockWatch:
             if not connected(sdf, peer.position, peer.goal, wall_clear, walls):
                 continue  # walled in, but not by us alone
             aside = _aside_goal(position, peer, walls, _everyone(peers), self.config.detour_m, keep_clear, sdf,
-                                wall_clear, steering, goal)
+                                wall_clear, steering)
             if aside is None:
                 continue
             stood = tuple(other for other in standing if other != cid and not peers[other].at_goal)
@@ -284,53 +277,44 @@ def _way(peer: PeerSeen) -> np.ndarray:
 
 def detour_goal(position: np.ndarray, ways: list[np.ndarray], everyone: list[np.ndarray], distance: float,
                 keep_clear: float, sdf: SignedDistanceField, wall_clear: float,
-                steering: tuple[float, float] | None = None, onward: np.ndarray | None = None) -> np.ndarray | None:
+                steering: tuple[float, float] | None = None) -> np.ndarray | None:
     """A point ``distance`` from ``position`` as directly away from the nearest points of
     ``ways`` (of the cars that go first) as walls and cars allow, and ``keep_clear`` off
-    those ways and every car seen; None when every direction tried is blocked. A car-like
-    car's (``steering``) must also be able to turn from it onto ``onward`` (its own way)."""
+    those ways and every car seen; None when every direction tried is blocked."""
     position = np.asarray(position, float)
     nearest = [way[int(np.argmin(np.linalg.norm(way - position, axis=1)))] for way in ways]
     away = sum(((position - p) / max(float(np.linalg.norm(position - p)), 1e-6) for p in nearest), np.zeros(2))
     avoid = np.vstack([*ways, *everyone]) if ways or everyone else np.zeros((0, 2))
     return _first_clear(position, away, DETOUR_TURNS_DEG, distance, avoid, keep_clear, sdf, wall_clear,
-                        steering=steering, onward=onward)
+                        steering=steering)
 
 
 def _aside_goal(position: np.ndarray, peer: PeerSeen, parked: list, everyone: list[np.ndarray], distance: float,
                 keep_clear: float, sdf: SignedDistanceField, wall_clear: float,
-                steering: tuple[float, float] | None = None, home: np.ndarray | None = None) -> np.ndarray | None:
+                steering: tuple[float, float] | None = None) -> np.ndarray | None:
     """A point ``distance`` from ``position``, reached along a clear segment and
     ``keep_clear`` off every car seen, from where we no longer wall ``peer`` in (first
-    straight away from it, then turning), and -- a car-like car -- from where it can turn
-    back towards ``home``; None if there is none."""
+    straight away from it, then turning); None if there is none."""
     others = np.array([p for p in everyone if np.linalg.norm(p - position) > 1e-6]).reshape(-1, 2)
     return _first_clear(position, position - peer.position, DETOUR_TURNS_DEG + (180.0,), distance, others,
                         keep_clear, sdf, wall_clear,
                         lambda goal: connected(sdf, peer.position, peer.goal, wall_clear,
-                                               [*parked, (tuple(goal), keep_clear)]), steering,
-                        None if home is None else np.asarray(home, float)[None, :])
+                                               [*parked, (tuple(goal), keep_clear)]), steering)
 
 
 def _first_clear(position: np.ndarray, away: np.ndarray, turns: tuple[float, ...], distance: float,
                  avoid: np.ndarray, keep_clear: float, sdf: SignedDistanceField, wall_clear: float,
-                 accept=lambda goal: True, steering: tuple[float, float] | None = None,
-                 onward: np.ndarray | None = None) -> np.ndarray | None:
+                 accept=lambda goal: True, steering: tuple[float, float] | None = None) -> np.ndarray | None:
     """The first point ``distance`` from ``position``, in the direction ``away`` turned by
     each of ``turns`` (degrees) in order, whose way there keeps ``wall_clear`` from the
     walls, that keeps ``keep_clear`` from every point of ``avoid`` and that ``accept``s.
     The way is straight, or for a car-like car (``steering``: heading, turning radius) the
-    arc that turns it to face the point, then straight, and then -- given ``onward``, the
-    car's own way (k, 2) -- the arc that turns it back onto that way (:func:`_way_on`)."""
+    arc that turns it to face the point, then straight."""
     base = math.atan2(away[1], away[0]) if np.linalg.norm(away) > 1e-6 else 0.0
     for turn in turns:
         angle = base + math.radians(turn)
         goal = position + distance * np.array([math.cos(angle), math.sin(angle)])
-        if steering is not None and onward is not None:  # the way there, and the way on from it
-            way = np.vstack([_way_to(position, goal, steering, ahead=False),
-                             _way_on(goal, _arrival_heading(position, goal, steering), onward, steering[1])])
-        else:
-            way = _way_to(position, goal, steering)
+        way = _way_to(position, goal, steering)
         if np.min(sdf.distance(way)) < wall_clear:
             continue
         if len(avoid) and np.min(np.linalg.norm(avoid - goal, axis=1)) < keep_clear:
@@ -340,40 +324,11 @@ def _first_clear(position: np.ndarray, away: np.ndarray, turns: tuple[float, ...
     return None
 
 
-def _arrival_heading(position: np.ndarray, goal: np.ndarray, steering: tuple[float, float]) -> float:
-    """The heading a car-like car arrives at ``goal`` with: that of the straight after its
-    departure arc (or its heading now, when the arc ends at the goal)."""
-    arc = departure_arc(position, steering[0], goal, steering[1])
-    start = arc[-1] if len(arc) else np.asarray(position, float)
-    offset = np.asarray(goal, float) - start
-    return math.atan2(offset[1], offset[0]) if float(np.hypot(*offset)) > 1e-6 else steering[0]
-
-
-def _way_on(position: np.ndarray, heading: float, onward: np.ndarray, radius: float) -> np.ndarray:
-    """Points of a car-like car's way back onto ``onward`` (k, 2: its route, then its goal)
-    from ``position``, facing ``heading``: the arc that turns it to face the point of
-    ``onward`` after the one nearest it (the goal, when the goal is nearest), then as far
-    on as its turning circle is wide."""
-    onward = np.asarray(onward, float).reshape(-1, 2)
-    nearest = int(np.argmin(np.linalg.norm(onward - position, axis=1)))
-    target = onward[min(nearest + 1, len(onward) - 1)]
-    arc = departure_arc(position, heading, target, radius)
-    start = arc[-1] if len(arc) else np.asarray(position, float)
-    offset = target - start
-    length = float(np.hypot(*offset))
-    if length < 1e-9:
-        return arc
-    ahead = start + np.linspace(0.0, min(2.0 * radius, length), SEGMENT_SAMPLES)[1:, None] * offset / length
-    return np.vstack([arc, ahead])
-
-
-def _way_to(position: np.ndarray, goal: np.ndarray, steering: tuple[float, float] | None,
-            ahead: bool = True) -> np.ndarray:
+def _way_to(position: np.ndarray, goal: np.ndarray, steering: tuple[float, float] | None) -> np.ndarray:
     """Points of the way from ``position`` to ``goal``: straight, or with a car-like car's
-    ``steering`` (heading, turning radius) its departure arc, then straight, then (``ahead``)
-    on as far again as the car's turning circle is wide -- a car that cannot turn standing
-    needs that room ahead of where it stops to drive anywhere from there, when where it
-    drives next is not known."""
+    ``steering`` (heading, turning radius) its departure arc, then straight, then on as
+    far again as the car's turning circle is wide -- a car that cannot turn standing needs
+    that room ahead of where it stops to drive anywhere from there."""
     start = position
     arc = np.zeros((0, 2))
     if steering is not None:
@@ -382,7 +337,7 @@ def _way_to(position: np.ndarray, goal: np.ndarray, steering: tuple[float, float
             start = arc[-1]
     way = np.vstack([arc, start + np.linspace(0.0, 1.0, SEGMENT_SAMPLES)[1:, None] * (goal - start)])
     length = float(np.linalg.norm(goal - start))
-    if steering is None or length < 1e-9 or not ahead:
+    if steering is None or length < 1e-9:
         return way
     ahead = goal + np.linspace(0.0, 2.0 * steering[1], SEGMENT_SAMPLES)[1:, None] * (goal - start) / length
     return np.vstack([way, ahead])

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from trustfg.agent.config import Obstacle, WorldConfig
-from trustfg.agent.deadlock import _arrival_heading, _way_on, _way_to, detour_goal
+from trustfg.agent.deadlock import _way_to, detour_goal
 from trustfg.agent.steering import departure_arc
 from trustfg.agent.world import build_sdf
 
@@ -45,30 +45,3 @@ def test_a_car_like_car_never_gives_way_nose_first_into_a_wall(pocket):
     car = detour_goal(position, ways, [], 0.6, KEEP_CLEAR, pocket, WALL_CLEAR, (math.pi / 2, R))
     assert car is not None and not np.allclose(car, [0.6, 0.0])
     assert float(np.min(pocket.distance(_way_to(position, car, (math.pi / 2, R))))) >= WALL_CLEAR
-
-
-
-@pytest.fixture(scope="module")
-def lane():
-    """A corridor 0.8 m wide running north-south: too narrow to turn round at R."""
-    return build_sdf(WorldConfig(bounds_m=(-3.0, -3.0, 3.0, 3.0), obstacles=(
-        Obstacle(min=(-3.0, -3.0), max=(-0.4, 3.0)), Obstacle(min=(0.4, -3.0), max=(3.0, 3.0)))))
-
-
-def test_a_car_like_car_gives_way_only_where_it_can_turn_back_onto_its_route(lane):
-    """In the corridor, facing north, with its route going on south and the car that goes
-    first coming up from the south: a point 0.6 m north has room ahead, and a car that
-    turns in place takes it; a car-like car could never turn back from there, so it does
-    not give way into it (nor anywhere else it could not turn out of)."""
-    position, heading = np.array([0.0, 0.0]), math.pi / 2
-    ways = [np.array([[0.0, -1.0], [0.0, -2.0]])]
-    route = np.array([[0.0, -2.5]])
-    unicycle = detour_goal(position, ways, [], 0.6, KEEP_CLEAR, lane, WALL_CLEAR)
-    assert np.allclose(unicycle, [0.0, 0.6])
-    blind = detour_goal(position, ways, [], 0.6, KEEP_CLEAR, lane, WALL_CLEAR, (heading, R))
-    assert np.allclose(blind, [0.0, 0.6])  # room ahead: without the route, taken
-    car = detour_goal(position, ways, [], 0.6, KEEP_CLEAR, lane, WALL_CLEAR, (heading, R), route)
-    assert car is None or float(np.min(lane.distance(
-        _way_on(car, _arrival_heading(position, car, (heading, R)), route, R)))) >= WALL_CLEAR
-    arrival = _arrival_heading(position, blind, (heading, R))
-    assert float(np.min(lane.distance(_way_on(blind, arrival, route, R)))) < WALL_CLEAR
