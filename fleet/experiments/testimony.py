@@ -190,11 +190,15 @@ def paired(on: list[dict], off: list[dict], key, statistic=np.median) -> dict | 
                            if value(r) is not None and by_seed.get(r["seed"]) is not None], statistic)
 
 
+def all_arrived(run: dict) -> float:
+    """1.0 when every car of a RUN reached its goal, else 0.0 (a rate's sample)."""
+    return float(all(run["reached_goal"]))
+
+
 def summarise(by_arm: dict[str, list[dict]]) -> dict:
     """The cells of one scene, and the paired differences on - off."""
-    every = lambda run: float(all(run["reached_goal"]))  # noqa: E731 -- a RUN's arrival as a number
     return {arm: cell(by_arm[arm]) for arm in ARMS} | {
-        "all_arrived_on_minus_off": paired(by_arm["on"], by_arm["off"], every, np.mean),
+        "all_arrived_on_minus_off": paired(by_arm["on"], by_arm["off"], all_arrived, np.mean),
         "makespan_on_minus_off": paired(by_arm["on"], by_arm["off"], "makespan_s"),
         "clearance_on_minus_off": paired(by_arm["on"], by_arm["off"], "liar_min_clearance")}
 

@@ -27,6 +27,9 @@ from . import recheck as bank_recheck
 from . import report as bank_report
 from .runner import BANK, METHODS, machine, scene_data
 
+RUN_KEYS = ("scene", "method", "seed", "outcome")
+"""What every run of a journal names."""
+
 
 def parse_take(spec: str) -> tuple[Path, list[str]]:
     """``FILE[:METHOD,...]`` -> (FILE, methods); no methods: every method."""
@@ -51,7 +54,11 @@ def read_journal(path: Path) -> list[dict]:
             continue
         try:
             entry = json.loads(line)
-            entry["scene"], entry["method"], entry["seed"], entry["outcome"]  # noqa: B018 -- the keys a run has
+            if not isinstance(entry, dict):
+                raise TypeError(f"a JSON {type(entry).__name__}, not an object")
+            missing = [key for key in RUN_KEYS if key not in entry]
+            if missing:
+                raise KeyError(", ".join(missing))
         except (json.JSONDecodeError, TypeError, KeyError) as exc:
             raise ConfigError(f"{path}:{number}: not a bank run ({type(exc).__name__}: {exc})") from None
         entries.append(entry)

@@ -39,8 +39,12 @@ def test_a_journal_line_that_is_not_a_run_is_named(tmp_path):
     with pytest.raises(ConfigError, match=r"runs.jsonl:2: not a bank run"):
         read_journal(path)
     path.write_text(json.dumps({"scene": "circle-4", "seed": 0}) + "\n")
-    with pytest.raises(ConfigError, match=r"runs.jsonl:1: not a bank run"):
+    with pytest.raises(ConfigError, match=r"runs.jsonl:1: not a bank run \(KeyError: 'method, outcome'\)"):
         read_journal(path)
+    for not_an_object in ('"scene method seed outcome"', "[1, 2]", "7"):
+        path.write_text(not_an_object + "\n")
+        with pytest.raises(ConfigError, match=r"runs.jsonl:1: not a bank run \(TypeError"):
+            read_journal(path)
     with pytest.raises(ConfigError, match="cannot read"):
         read_journal(tmp_path / "missing.jsonl")
 
