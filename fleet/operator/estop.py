@@ -13,7 +13,6 @@ and exits with 1 when a named car confirmed on neither.
 from __future__ import annotations
 
 import argparse
-import logging
 import sys
 import time
 from typing import TYPE_CHECKING, Callable
@@ -24,8 +23,6 @@ from .estop_first import DIRECT_PERIOD_S, DIRECT_REPEAT_S, first_e_stop
 if TYPE_CHECKING:
     from ...agent.config import Scenario
     from .estop_direct import LinkStopper
-
-log = logging.getLogger(__name__)
 
 BUS_JOIN_S = 1.0
 """A release or an abort waits up to this long for the car processes to be seen on the bus."""
@@ -88,7 +85,9 @@ def main(argv: list[str] | None = None, ready: Callable[[], None] = lambda: None
 
 def _on_the_bus(fleet: "Scenario", cars: list[int], action: str, args: argparse.Namespace,
                 stopper: LinkStopper | None, issued: float, sent_direct: float | None) -> int:
-    from ...agent import messages  # imported after the direct path went out
+    import logging  # as everything here: imported after the direct path went out
+
+    from ...agent import messages
     from ..bus.session import BusError, FleetBus
     from .session import OperatorSession
 
@@ -120,7 +119,8 @@ def _on_the_bus(fleet: "Scenario", cars: list[int], action: str, args: argparse.
                 next_ask = time.monotonic() + ask_again_s
                 unheard = [car for car in cars if not seen[car]]
                 if unheard:
-                    log.info("no status yet from cars %s: subscribing to status again", " ".join(map(str, unheard)))
+                    logging.getLogger(__name__).info("no status yet from cars %s: subscribing to status again",
+                                                     " ".join(map(str, unheard)))
                     bus.subscribe_again("status")
             if stopper is not None:
                 if action == "release" and time.monotonic() >= next_ping:
