@@ -1,6 +1,7 @@
 """E-stop latency in ``trustfg sim``: from ``trustfg stop`` to every car applying zero.
 
-    python benchmarks/bench_estop.py [--rounds 20] [--bus-rounds 5] [--session-rounds 5] [--seed 0] [--out FILE]
+    python benchmarks/bench_estop.py [--rounds 20] [--bus-rounds 5] [--session-rounds 5] [--release-rounds 0]
+                                     [--seed 0] [--out FILE]
 
 Runs ``trustfg sim --stay`` with four cars and joins its bus as the operator. Each round
 starts a trial, waits a random moment while the cars drive (U(1, 4) s after the departure,
@@ -10,7 +11,11 @@ every car must then hold for a second; release; back to the starts. Every fourth
 freezes the car processes (SIGSTOP) first and stops with ``--path link`` alone; resumed,
 they command motion again and the cars must still hold. ``--bus-rounds`` use the bus
 path alone, ``--session-rounds`` use the benchmark's own operator session (as ``trustfg
-go``'s stop key does). Results: docs/results/performance.md#e-stop.
+go``'s stop key does). ``--release-rounds`` freeze the car processes and stop on the links
+as above, and then release with ``trustfg stop --release`` as a fresh process: whether it
+confirms every car on the bus and on its link within its default ``--wait`` (the benchmark
+releases through its own session afterwards either way). Results:
+docs/results/performance.md#e-stop.
 """
 
 from __future__ import annotations
@@ -84,7 +89,7 @@ class Operator:
 
 
 def one_stop(run: Path, log: CommandLog, operator: Operator, ids: list[int], delay_s: float, path: str,
-             pause: bool, control_port: int) -> dict:
+             pause: bool, control_port: int, release_by_stop: bool = False) -> dict:
     now = time.time()
     operator.session.start({car: (now + 0.5, 0.4) for car in ids})
     operator.poll(0.5 + delay_s)
@@ -111,6 +116,12 @@ def one_stop(run: Path, log: CommandLog, operator: Operator, ids: list[int], del
            "all_stopped": all(held[car] is not None for car in ids),
            "moved_again": sorted(log.moved_after(max((t for t in held.values() if t), default=issued))),
            "stop_exit": exit_status}
+    if release_by_stop:
+        released = subprocess.run([sys.executable, "-m", "trustfg", "stop", "--config", str(run / "fleet.toml"),
+                                   "--release"], capture_output=True, text=True, timeout=30)
+        row["release_exit"] = released.returncode
+        row["release_confirmed"] = released.returncode == 0 and released.stdout.count("not latched") == len(ids)
+        row["release_asked_again"] = "subscribing to status again" in released.stderr
     operator.session.release()
     operator.wait_states({"waiting", "arrived"}, 10.0)
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
@@ -135,6 +146,9 @@ def main() -> int:
     parser.add_argument("--bus-rounds", type=int, default=5, help="e-stop rounds on the bus path alone")
     parser.add_argument("--session-rounds", type=int, default=5,
                         help="e-stop rounds from a running operator's session (go's key, the dashboard's button)")
+    parser.add_argument("--release-rounds", type=int, default=0,
+                        help="rounds that stop on the links with the car processes frozen, then release with "
+                             "trustfg stop --release")
     parser.add_argument("--seed", type=int, default=0, help="seed of the random moments")
     parser.add_argument("--out", type=Path, default=None, help="write every stop as JSON here")
     args = parser.parse_args()
@@ -158,11 +172,11 @@ def main() -> int:
         operator.wait_states({"waiting"}, 10.0)
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
             s.sendto(b'{"reset": true}', ("127.0.0.1", control_port))
-        plan = ([("both", k % 4 == 3) for k in range(args.rounds)] + [("bus", False)] * args.bus_rounds
-                + [("session", False)] * args.session_rounds)
-        for k, (path, pause) in enumerate(plan):
+        plan = ([("both", k % 4 == 3, False) for k in range(args.rounds)] + [("bus", False, False)] * args.bus_rounds
+                + [("session", False, False)] * args.session_rounds + [("link", True, True)] * args.release_rounds)
+        for k, (path, pause, release_by_stop) in enumerate(plan):
             row = one_stop(run, CommandLog(run / "commands.csv"), operator, ids, float(rng.uniform(1.0, 4.0)),
-                           "link" if pause else path, pause, control_port)
+                           "link" if pause else path, pause, control_port, release_by_stop)
             rows.append(row)
             print(f"stop {k + 1}/{len(plan)}: {row}", flush=True)
     finally:
@@ -170,11 +184,16 @@ def main() -> int:
             operator.bus.close()
         os.killpg(sim.pid, signal.SIGINT)
         sim.wait(60)
-    both = [r for r in rows if r["path"] in ("both", "link")]
+    both = [r for r in rows if r["path"] in ("both", "link") and "release_exit" not in r]
+    releases = [r for r in rows if "release_exit" in r]
     result = {"trustfg stop (both paths; every 4th: link only, car processes stopped)": summary(both),
               "of which car processes stopped": summary([r for r in both if r["car_processes_paused"]]),
               "bus path alone": summary([r for r in rows if r["path"] == "bus"]),
               "an operator's session (both paths)": summary([r for r in rows if r["path"] == "session"]),
+              "trustfg stop --release after a link stop, car processes stopped and resumed": {
+                  "releases": len(releases), "confirmed": sum(r["release_confirmed"] for r in releases),
+                  "status asked again": sum(r["release_asked_again"] for r in releases),
+                  "stops": summary(releases)},
               "rows": rows}
     for name, numbers in result.items():
         if name != "rows":
