@@ -32,6 +32,7 @@ from .config import PlannerConfig
 from .gp import Plan, interpolation_weights
 from .heading_factors import add_heading_factors, insert_headings
 from .interval_factors import add_batched_checks, add_gtsam_interp_checks
+from .routes import path_length
 from .steering import departure_arc, initial_headings
 from .world import SignedDistanceField
 
@@ -134,7 +135,8 @@ def plan_trajectory(request: PlanRequest, config: PlannerConfig, sdf: SignedDist
         # that is not where the peers are when they are there.
         sigmas = factors.interval_sigmas(problem, config.sigma_obstacle, config.sigma_proximity,
                                          config.sigma_speed, config.sigma_lane, config.sigma_consistency)
-        candidates = [seed_plan(request, t0, dt, n, pace, config.turn_radius_margin) for pace in SEED_PACES]
+        candidates = [seed_plan(request, t0, dt, n, pace, config.turn_radius_margin, first)
+                      for first in _seed_entries(request, config.turn_radius_margin) for pace in SEED_PACES]
         values = _values(min(candidates, key=lambda seed: _checks_cost(problem, seed, sigmas)),
                          request.heading if request.car_like else None)
     params = gtsam.LevenbergMarquardtParams()
@@ -309,16 +311,33 @@ def _state_keys(n: int) -> tuple[tuple[int, ...], tuple[int, ...]]:
     return tuple(X(i) for i in range(n)), tuple(V(i) for i in range(n))
 
 
+def _seed_entries(request: PlanRequest, turn_radius_margin: float) -> list[int]:
+    """Where cold seeds join the route: index k of the first of request.route[k:] + goal
+    they head for. A car that turns in place follows the whole route (k = 0). A car-like
+    car tries every k, shortest way first (departure arc, then on along the route): a car
+    moved off its route (a detour, a fallback) may face away from via points already
+    behind it, and heading back for them means a loop it may have no room for."""
+    if not request.car_like or not request.route:
+        return [0]
+    radius = request.min_turn_radius_m * (1.0 + turn_radius_margin)
+    points = np.array([request.position, *request.route, request.goal], dtype=float)
+    lengths = []
+    for k in range(len(points) - 1):
+        arc = departure_arc(points[0], request.heading, points[k + 1], radius)
+        lengths.append(path_length(np.vstack([points[:1], arc, points[k + 1:]])))
+    return sorted(range(len(lengths)), key=lengths.__getitem__)
+
+
 def seed_plan(request: PlanRequest, t0: float, dt: float, n: int, pace: float = 1.0,
-              turn_radius_margin: float = 0.0) -> Plan:
-    """A cold-start trajectory along start -> via points -> goal, easing in and out; a
-    car-like car's begins with the arc that turns it from its heading to face the first
-    of them (agent.steering.departure_arc, at the planned radius).
+              turn_radius_margin: float = 0.0, first: int = 0) -> Plan:
+    """A cold-start trajectory along start -> via points route[first:] -> goal, easing in
+    and out; a car-like car's begins with the arc that turns it from its heading to face
+    the first of them (agent.steering.departure_arc, at the planned radius).
 
     The arc length follows smoothstep(w(u)) with w(u) = u**pace on normalised time u, so
     pace > 1 lingers early and hurries late, pace < 1 the reverse.
     """
-    points = np.array([request.position, *request.route, request.goal], dtype=float)
+    points = np.array([request.position, *request.route[first:], request.goal], dtype=float)
     if request.car_like:
         radius = request.min_turn_radius_m * (1.0 + turn_radius_margin)
         arc = departure_arc(points[0], request.heading, points[1], radius)

@@ -130,3 +130,18 @@ def test_a_unicycle_is_never_held_to_a_heading(open_sdf):
     there_and_back = Plan(0.0, 1.0, np.array([[0.0, 0.0], [0.5, 0.0], [0.0, 0.0]]), np.zeros((3, 2)))
     verdict = verify(there_and_back, [], bounds, open_sdf, VerifyConfig(limit_lag_m=10.0), start_heading=math.pi)
     assert verdict.ok
+
+
+def test_a_car_like_car_moved_off_its_route_heads_on_instead_of_looping_back(open_sdf):
+    """A car-like car that stands past its first via point, facing on along its route
+    (as after a detour), plans on towards the next via point: its cold plan does not loop
+    back round to the point behind it, and it verifies."""
+    request = PlanRequest(t_now=0.0, position=np.array([0.0, 0.0]), velocity=np.zeros(2),
+                          goal=np.array([2.0, 0.5]), t_arrive=10.0, epsilon_obstacle=0.25,
+                          route=((-0.2, -0.1), (1.0, 0.5)), steering=(0.0, R))
+    bounds = Bounds.of(0.25, 0.2, [], VehicleConfig(steering="car", min_turn_radius_m=R))
+    outcome = plan_safely(request, bounds, PlannerConfig(), VerifyConfig(), open_sdf, None)
+    assert outcome.outcome in (FIRST, RETRY), outcome.tried
+    path = outcome.plan.position_at(np.linspace(0.0, outcome.plan.t_end, 200))
+    assert np.min(path[:, 0]) > -0.05, "looped back to the via point behind the car"
+    assert np.linalg.norm(outcome.plan.positions[-1] - request.goal) < 0.05
