@@ -136,7 +136,7 @@ def plan_trajectory(request: PlanRequest, config: PlannerConfig, sdf: SignedDist
         sigmas = factors.interval_sigmas(problem, config.sigma_obstacle, config.sigma_proximity,
                                          config.sigma_speed, config.sigma_lane, config.sigma_consistency)
         candidates = [seed_plan(request, t0, dt, n, pace, config.turn_radius_margin, first)
-                      for first in _seed_entries(request, config.turn_radius_margin) for pace in SEED_PACES]
+                      for first in _seed_entries(request, config.turn_radius_margin, sdf) for pace in SEED_PACES]
         values = _values(min(candidates, key=lambda seed: _checks_cost(problem, seed, sigmas)),
                          request.heading if request.car_like else None)
     params = gtsam.LevenbergMarquardtParams()
@@ -288,6 +288,8 @@ COARSE_MIN_STATES = 11
 """Cold starts with at least 2 * this - 1 support states are solved coarse to fine."""
 SEED_PACES = (1.0, 0.6, 1.6, 2.4)
 """Exponents gamma of the cold-start time warps u -> u**gamma (1: even pace)."""
+SEED_CHECK_M = 0.05
+"""Spacing of the wall checks along a car-like seed's straight to a via point, m."""
 
 
 def _values(plan: Plan, heading: float | None = None) -> gtsam.Values:
@@ -311,21 +313,27 @@ def _state_keys(n: int) -> tuple[tuple[int, ...], tuple[int, ...]]:
     return tuple(X(i) for i in range(n)), tuple(V(i) for i in range(n))
 
 
-def _seed_entries(request: PlanRequest, turn_radius_margin: float) -> list[int]:
+def _seed_entries(request: PlanRequest, turn_radius_margin: float, sdf: SignedDistanceField) -> list[int]:
     """Where cold seeds join the route: index k of the first of request.route[k:] + goal
     they head for. A car that turns in place follows the whole route (k = 0). A car-like
-    car tries every k, shortest way first (departure arc, then on along the route): a car
-    moved off its route (a detour, a fallback) may face away from via points already
-    behind it, and heading back for them means a loop it may have no room for."""
+    car tries every k whose way there (departure arc, then straight) keeps
+    ``epsilon_obstacle`` from the walls, shortest way (on along the route) first, and the
+    whole route last: a car moved off its route (a detour, a fallback) may face away from
+    via points already behind it, and heading back for them means a loop it may have no
+    room for."""
     if not request.car_like or not request.route:
         return [0]
     radius = request.min_turn_radius_m * (1.0 + turn_radius_margin)
     points = np.array([request.position, *request.route, request.goal], dtype=float)
-    lengths = []
+    clear = {}
     for k in range(len(points) - 1):
         arc = departure_arc(points[0], request.heading, points[k + 1], radius)
-        lengths.append(path_length(np.vstack([points[:1], arc, points[k + 1:]])))
-    return sorted(range(len(lengths)), key=lengths.__getitem__)
+        start = arc[-1] if len(arc) else points[0]
+        count = max(2, int(np.ceil(np.linalg.norm(points[k + 1] - start) / SEED_CHECK_M)) + 1)
+        way = np.vstack([arc, start + np.linspace(0.0, 1.0, count)[1:, None] * (points[k + 1] - start)])
+        if np.min(sdf.distance(way)) >= request.epsilon_obstacle:
+            clear[k] = path_length(np.vstack([points[:1], arc, points[k + 1:]]))
+    return sorted(clear, key=clear.__getitem__) + ([] if 0 in clear else [0])
 
 
 def seed_plan(request: PlanRequest, t0: float, dt: float, n: int, pace: float = 1.0,
