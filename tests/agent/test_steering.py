@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from trustfg.agent.config import PlannerConfig, VehicleConfig, VerifyConfig, WorldConfig
+from trustfg.agent.config import Obstacle, PlannerConfig, VehicleConfig, VerifyConfig, WorldConfig
 from trustfg.agent.gp import Plan
-from trustfg.agent.planner import PlanRequest, plan_trajectory
+from trustfg.agent.planner import PlanRequest, _seed_entries, plan_trajectory
 from trustfg.agent.safe_plan import FIRST, RETRY, plan_safely
 from trustfg.agent.steering import departure_arc, initial_headings, turning_excess, wrap
 from trustfg.agent.verify import Bounds, verify
@@ -145,3 +145,17 @@ def test_a_car_like_car_moved_off_its_route_heads_on_instead_of_looping_back(ope
     path = outcome.plan.position_at(np.linspace(0.0, outcome.plan.t_end, 200))
     assert np.min(path[:, 0]) > -0.05, "looped back to the via point behind the car"
     assert np.linalg.norm(outcome.plan.positions[-1] - request.goal) < 0.05
+
+
+def test_a_car_like_seed_joins_its_route_only_where_the_way_there_is_clear(open_sdf):
+    """Seeds join the route at a via point only along a way clear of the walls: with a
+    wall between the car and its goal, the seed that heads straight for the goal (shorter,
+    and the first tried in the open) is not among them; the whole route always is. A car
+    that turns in place has the one seed along its whole route."""
+    request = PlanRequest(t_now=0.0, position=np.array([0.0, 0.0]), velocity=np.zeros(2),
+                          goal=np.array([1.5, 0.0]), t_arrive=10.0, epsilon_obstacle=0.15,
+                          route=((0.6, 1.2),), steering=(math.pi / 2, R))
+    assert _seed_entries(request, 0.15, open_sdf) == [1, 0]  # the goal (k = 1) is nearer
+    walled = build_sdf(WorldConfig(obstacles=(Obstacle(kind="rect", min=(0.5, -1.0), max=(0.7, 0.7)),)))
+    assert _seed_entries(request, 0.15, walled) == [0]
+    assert _seed_entries(dataclasses.replace(request, steering=None), 0.15, walled) == [0]
