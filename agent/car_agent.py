@@ -36,7 +36,7 @@ from .planner import PeerConstraint, PlanningError, PlanRequest, PlanResult
 from .safe_plan import FALLBACK, FIRST, KEPT, RETRY, Outcome, plan_safely
 from .sight import out_of_sight, unseen_epsilon
 from .sightings import Track, predicted_plan, standing_at
-from .steering import held_to
+from .steering import departure_arc, held_to
 from .trust import TrustBook
 from .verify import Bounds, verify
 from .witness import Witness, recorder
@@ -253,9 +253,10 @@ class CarAgent:
             self.at_goal = False  # parked across a peer's only way: the detour below, then back
         t0 = max(now, self.depart_at)
         position, velocity, on_plan = self._start_state(motion, t0, now)
-        remaining = self._remaining_length(motion.position, t0)
+        remaining = self._remaining_length(motion.position, t0, held_to(self.scenario.vehicle, motion.yaw))
         # A car that yielded is behind schedule: its arrival slips so that it goes on at
-        # its cruise speed instead of racing to catch up.
+        # its cruise speed instead of racing to catch up (a car-like car's by the turn it
+        # has to make first, too).
         self.t_arrive = max(self.t_arrive, t0 + remaining / self.cruise + 0.5 * ARRIVAL_SLACK_S)
         t_arrive = self.t_arrive
         constraints = self.peer_constraints(now)
@@ -398,13 +399,23 @@ class CarAgent:
         self.counters["replan_from_measured"] += 1
         return motion.position, motion.velocity, False
 
-    def _remaining_length(self, position: np.ndarray, t0: float) -> float:
+    def _remaining_length(self, position: np.ndarray, t0: float,
+                          steering: tuple[float, float] | None = None) -> float:
+        """The length of the way on: along the plan (a plan that stops short, a fallback,
+        leaves the rest straight to the goal), or the route. A car-like car (``steering``:
+        heading, turning radius) first turns to face the way's first point beyond its
+        turning circle's width, on the departure arc (agent.steering)."""
         if self.plan is None:
             points = np.array([position, *self.car.route, self.car.goal])
         else:
             times = np.linspace(t0, max(self.plan.t_end, t0), 30)
-            # A plan that stops short of the goal (a fallback) leaves the rest of the way.
             points = np.vstack([position, self.plan.position_at(times), self.car.goal])
+        if steering is not None:
+            heading, radius = steering
+            beyond = np.flatnonzero(np.linalg.norm(points - position, axis=1) > 2.0 * radius)
+            if len(beyond):
+                arc = departure_arc(position, heading, points[beyond[0]], radius)
+                points = np.vstack([points[:1], arc, points[beyond[0]:]])
         return float(np.sum(np.linalg.norm(np.diff(points, axis=0), axis=1)))
 
     # --- outputs ----------------------------------------------------------------------------
