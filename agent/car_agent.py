@@ -413,9 +413,9 @@ class CarAgent:
         if steering is not None:
             heading, radius = steering
             beyond = np.flatnonzero(np.linalg.norm(points - position, axis=1) > 2.0 * radius)
-            if len(beyond):
-                arc = departure_arc(position, heading, points[beyond[0]], radius)
-                points = np.vstack([points[:1], arc, points[beyond[0]:]])
+            first = int(beyond[0]) if len(beyond) else len(points) - 1
+            arc = departure_arc(position, heading, points[first], radius)
+            points = np.vstack([points[:1], arc, points[first:]])
         return float(np.sum(np.linalg.norm(np.diff(points, axis=0), axis=1)))
 
     # --- outputs ----------------------------------------------------------------------------

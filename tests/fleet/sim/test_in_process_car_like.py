@@ -48,3 +48,16 @@ def test_two_car_like_cars_crossing_keep_their_distance():
     assert gaps.min() > scenario.safety.breach_distance(0.1, 0.1)
     curvature, turned_standing = curvature_and_standing_turns(record)
     assert curvature <= 1 / CAR.min_turn_radius_m + 1e-6 and turned_standing == 0
+
+
+@pytest.mark.parametrize("goal", [(-0.8, -0.3), (-0.4, 0.2), (-0.3, 0.0)])
+def test_a_car_facing_away_from_a_goal_close_behind_it_loops_round_and_arrives(goal):
+    """The goal lies behind a car facing north-east, nearer than the loop it takes to face
+    it (in two of the three inside its left turning circle): its plans get the time of
+    that loop, not of the straight, and it arrives, never turning standing or tighter than
+    its radius."""
+    scenario = open_field(CarConfig(id=1, start=(0.0, 0.0), goal=goal, start_heading_rad=0.5))
+    record = simulate(scenario, 0, record_trust=False)
+    assert record.arrived_at[0] is not None
+    curvature, turned_standing = curvature_and_standing_turns(record)
+    assert curvature <= 1 / CAR.min_turn_radius_m + 1e-6 and turned_standing == 0
