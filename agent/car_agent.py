@@ -36,7 +36,7 @@ from .planner import PeerConstraint, PlanningError, PlanRequest, PlanResult
 from .safe_plan import FALLBACK, FIRST, KEPT, RETRY, Outcome, plan_safely
 from .sight import out_of_sight, unseen_epsilon
 from .sightings import Track, predicted_plan, standing_at
-from .steering import departure_arc, held_to
+from .steering import held_to, turn_then
 from .trust import TrustBook
 from .verify import Bounds, verify
 from .witness import Witness, recorder
@@ -401,21 +401,15 @@ class CarAgent:
 
     def _remaining_length(self, position: np.ndarray, t0: float,
                           steering: tuple[float, float] | None = None) -> float:
-        """The length of the way on: along the plan (a plan that stops short, a fallback,
-        leaves the rest straight to the goal), or the route. A car-like car (``steering``:
-        heading, turning radius) first turns to face the way's first point beyond its
-        turning circle's width, on the departure arc (agent.steering)."""
+        """Along the plan (one that stops short leaves the rest straight to the goal), or
+        the route; a car-like car's (``steering``) turn first (agent.steering.turn_then)."""
         if self.plan is None:
             points = np.array([position, *self.car.route, self.car.goal])
         else:
             times = np.linspace(t0, max(self.plan.t_end, t0), 30)
             points = np.vstack([position, self.plan.position_at(times), self.car.goal])
         if steering is not None:
-            heading, radius = steering
-            beyond = np.flatnonzero(np.linalg.norm(points - position, axis=1) > 2.0 * radius)
-            first = int(beyond[0]) if len(beyond) else len(points) - 1
-            arc = departure_arc(position, heading, points[first], radius)
-            points = np.vstack([points[:1], arc, points[first:]])
+            points = turn_then(points, *steering)
         return float(np.sum(np.linalg.norm(np.diff(points, axis=0), axis=1)))
 
     # --- outputs ----------------------------------------------------------------------------

@@ -6,6 +6,7 @@ of at least R_min, and never reverses. Three questions come up again and again:
 * :func:`departure_arc` -- which turn takes a car standing at a heading round to face a
   point (the start of a cold plan, a detour): a circular arc at radius R towards the side
   the point lies on (the other side when the point lies inside that turning circle);
+  :func:`turn_then` puts it in front of a way on (the length that sets an arrival);
 * :func:`turning_excess` -- does a path turn tighter than a car starting at a heading can
   drive (verification): along the path's arc length s its heading phi(s), the car's own
   at s = 0, must keep |phi(s_b) - phi(s_a)| <= (s_b - s_a) / R + slack for every s_a < s_b;
@@ -69,6 +70,16 @@ def departure_arc(position: np.ndarray, heading: float, target: np.ndarray, radi
         if abs(bearing) <= step_rad / 2 or crossed:
             break
     return np.array(points)
+
+
+def turn_then(way: np.ndarray, heading: float, radius: float) -> np.ndarray:
+    """The way (k, 2) from where a car-like car stands (way[0]), facing ``heading``, with
+    the departure arc first that turns it to face the way's first point beyond its
+    turning circle's width (the last point when none is), that point on."""
+    way = np.asarray(way, float)
+    beyond = np.flatnonzero(np.linalg.norm(way - way[0], axis=1) > 2.0 * radius)
+    first = int(beyond[0]) if len(beyond) else len(way) - 1
+    return np.vstack([way[:1], departure_arc(way[0], heading, way[first], radius), way[first:]])
 
 
 def turning_excess(points: np.ndarray, heading: float | None, radius: float, slack_rad: float,

@@ -11,7 +11,7 @@ from trustfg.agent.config import Obstacle, PlannerConfig, VehicleConfig, VerifyC
 from trustfg.agent.gp import Plan
 from trustfg.agent.planner import PlanRequest, _seed_entries, plan_trajectory
 from trustfg.agent.safe_plan import FIRST, RETRY, plan_safely
-from trustfg.agent.steering import departure_arc, initial_headings, turning_excess, wrap
+from trustfg.agent.steering import departure_arc, initial_headings, turn_then, turning_excess, wrap
 from trustfg.agent.verify import Bounds, verify
 from trustfg.agent.world import build_sdf
 
@@ -159,3 +159,20 @@ def test_a_car_like_seed_joins_its_route_only_where_the_way_there_is_clear(open_
     walled = build_sdf(WorldConfig(obstacles=(Obstacle(kind="rect", min=(0.5, -1.0), max=(0.7, 0.7)),)))
     assert _seed_entries(request, 0.15, walled) == [0]
     assert _seed_entries(dataclasses.replace(request, steering=None), 0.15, walled) == [0]
+
+
+def test_a_way_on_starts_with_the_turn_to_its_first_point_beyond_the_turning_circle():
+    """Facing the way on: no longer than the way. Facing away: the arc first, to the first
+    point beyond 2R (points nearer are skipped: the car turns past them), or to the last
+    point when every point lies nearer -- a goal just behind the car is a loop away."""
+    way = np.array([[0.0, 0.0], [0.2, 0.0], [1.0, 0.0], [2.0, 0.0]])
+    assert path_length_of(turn_then(way, 0.0, R)) == pytest.approx(2.0)
+    turned = turn_then(way, math.pi, R)
+    assert np.array_equal(turned[-2:], way[2:]) and len(turned) > len(way) - 1
+    assert path_length_of(turned) > 2.0 + math.pi * R
+    near = np.array([[0.0, 0.0], [-0.3, 0.0]])
+    assert path_length_of(turn_then(near, 0.0, R)) > math.pi * R
+
+
+def path_length_of(points: np.ndarray) -> float:
+    return float(np.sum(np.linalg.norm(np.diff(points, axis=0), axis=1)))
