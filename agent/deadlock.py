@@ -5,7 +5,8 @@ every replan, from the poses it observes and the plans it hears: it is deadlocke
 it and every car of its group (peers near it or in its way, not parked, waiting or
 stuck) are stalled -- less than ``progress_m`` nearer their goals over ``window_s``. The
 car of the group that has been through the most deadlocks, then the lowest id, goes on;
-every other drives to a detour for ``yield_s``. A car parked at its goal that alone walls
+every other drives to a detour for ``yield_s``, clear of the lanes of the cars that go
+before it (:func:`lane`). A car parked at its goal that alone walls
 a stuck peer in steps aside (:meth:`DeadlockWatch.step_aside`) until the peer has a way.
 
 A car-like car (VehicleConfig.steering = "car") passes its heading and turning radius:
@@ -40,6 +41,8 @@ SEEN_S = 0.5
 WAITING_S = 0.05
 """A peer whose latest plan starts this much after it was sent has not departed yet."""
 WAY_SAMPLES = 20
+LANE_STEP_M = 0.05
+"""A detour keeps off the straight legs of a way that goes first, checked this often."""
 ASIDE_MAX_YIELDS = 4
 """A step aside ends after at most this many ``yield_s``, walled-in peer or not."""
 
@@ -280,13 +283,35 @@ def detour_goal(position: np.ndarray, ways: list[np.ndarray], everyone: list[np.
                 steering: tuple[float, float] | None = None) -> np.ndarray | None:
     """A point ``distance`` from ``position`` as directly away from the nearest points of
     ``ways`` (of the cars that go first) as walls and cars allow, and ``keep_clear`` off
-    those ways and every car seen; None when every direction tried is blocked."""
+    those ways (:func:`lane`) and every car seen; None when every direction tried is blocked."""
     position = np.asarray(position, float)
     nearest = [way[int(np.argmin(np.linalg.norm(way - position, axis=1)))] for way in ways]
     away = sum(((position - p) / max(float(np.linalg.norm(position - p)), 1e-6) for p in nearest), np.zeros(2))
-    avoid = np.vstack([*ways, *everyone]) if ways or everyone else np.zeros((0, 2))
+    avoid = np.vstack([*(lane(way, sdf) for way in ways), *everyone]) if ways or everyone else np.zeros((0, 2))
     return _first_clear(position, away, DETOUR_TURNS_DEG, distance, avoid, keep_clear, sdf, wall_clear,
                         steering=steering)
+
+
+def lane(way: np.ndarray, sdf: SignedDistanceField, step: float = LANE_STEP_M) -> np.ndarray:
+    """The points a car whose ``way`` (k, 2) goes first will drive over: the way with each
+    leg between two of its points filled in every ``step``, up to where a leg first meets a
+    wall (beyond it the car goes round, by a route we do not know). A car that stands
+    has a way of its position and its goal: the straight between them is its lane, and a
+    car that gives way must not stand on it."""
+    way = np.asarray(way, float)
+    points = [way[:1]]
+    for a, b in zip(way[:-1], way[1:]):
+        count = int(math.ceil(float(np.linalg.norm(b - a)) / step))
+        if count <= 1:
+            points.append(b[None, :])
+            continue
+        leg = a + np.linspace(0.0, 1.0, count + 1)[1:, None] * (b - a)
+        inside = np.flatnonzero(sdf.distance(leg) < 0.0)
+        if len(inside):
+            points.append(leg[:inside[0]])
+            break
+        points.append(leg)
+    return np.vstack(points)
 
 
 def _aside_goal(position: np.ndarray, peer: PeerSeen, parked: list, everyone: list[np.ndarray], distance: float,

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from trustfg.agent.config import DeadlockConfig, Obstacle, TrustConfig, WorldConfig
-from trustfg.agent.deadlock import DeadlockWatch, PeerSeen, goes_first, peers_seen
+from trustfg.agent.deadlock import LANE_STEP_M, DeadlockWatch, PeerSeen, goes_first, lane, peers_seen
 from trustfg.agent.evidence import PeerView
 from trustfg.agent.gp import standing
 from trustfg.agent.messages import PlanMessage
@@ -310,6 +310,30 @@ def test_a_detour_keeps_off_every_peers_goal(room):
     detour = first_detour({3: three}, room)
     assert np.linalg.norm(detour - alone) >= KEEP_CLEAR
     assert np.linalg.norm(detour - TWO["position"]) == pytest.approx(CONFIG.detour_m)
+
+
+def test_a_detour_keeps_off_the_lane_of_a_car_that_stands_and_goes_first(room):
+    """Car 1 stands at (-2, 0), its plan a standstill, its goal (2, 0): its way is those two
+    points, its lane the straight between them. Car 2, 0.3 m south of that lane, whose
+    plans fail against car 1, gives way: straight away from car 1 is east-south-east, whose point 0.6 m off lies 0.39 m
+    from the lane -- a car standing there would block the car it gave way to."""
+    one = PeerSeen(np.array([-2.0, 0.0]), goal=np.array([2.0, 0.0]), way=np.array([[-2.0, 0.0], [2.0, 0.0]]))
+    position = np.array([0.0, -0.3])
+    watch = DeadlockWatch(2, CONFIG)
+    detours = [watch.goal(t, position, np.array([-2.0, -0.3]), {1: one}, True, KEEP_CLEAR, room, WALL_CLEAR,
+                          frozenset({1})) for t in np.arange(0.0, CONFIG.window_s + 1.0, STEP_S)]
+    detour = next(d for d in detours if d is not None)
+    lane = np.linspace([-2.0, 0.0], [2.0, 0.0], 401)
+    assert float(np.min(np.linalg.norm(lane - detour, axis=1))) >= KEEP_CLEAR
+    assert np.linalg.norm(detour - position) == pytest.approx(CONFIG.detour_m)
+
+
+def test_a_lane_stops_where_it_first_meets_a_wall(pocket):
+    """The straight to a goal behind a wall is not the way there: the lane ends at the wall."""
+    way = np.array([[-1.0, -0.8], [-1.0, 0.8]])  # across the pocket's wall at y = 0
+    points = lane(way, pocket)
+    assert float(np.min(pocket.distance(points))) >= 0.0
+    assert -0.1 < np.max(points[:, 1]) < -0.05 and np.max(np.diff(points[:, 1])) <= LANE_STEP_M + 1e-9
 
 
 def test_a_peer_is_seen_stuck_exactly_when_its_latest_plan_says_so():
