@@ -7,7 +7,8 @@ stuck) are stalled -- less than ``progress_m`` nearer their goals over ``window_
 car of the group that has been through the most deadlocks, then the lowest id, goes on;
 every other drives to a detour for ``yield_s``, clear of the lanes of the cars that go
 before it (:func:`lane`). A car parked at its goal that alone walls
-a stuck peer in steps aside (:meth:`DeadlockWatch.step_aside`) until the peer has a way.
+a stuck peer in (or, car-like, boxes it in: :func:`boxes_in`) steps aside
+(:meth:`DeadlockWatch.step_aside`) until the peer has a way.
 
 A car-like car (VehicleConfig.steering = "car") passes its heading and turning radius:
 its way to a detour is the arc that turns it there (agent.steering.departure_arc), not a
@@ -28,7 +29,7 @@ import numpy as np
 from .config import DeadlockConfig
 from .fallback import MOVING_MPS  # the fallback's "comes to rest": the same test of a plan's end
 from .routes import connected
-from .steering import departure_arc
+from .steering import departure_arc, ways_on
 from .world import SignedDistanceField
 
 DETOUR_TURNS_DEG = (0.0, 22.5, -22.5, 45.0, -45.0, 67.5, -67.5, 90.0, -90.0, 112.5, -112.5, 135.0, -135.0, 157.5,
@@ -66,6 +67,8 @@ class PeerSeen:
     """It says it is told to drive and does not move (agent.messages.PlanMessage.stuck)."""
     deadlocks: int = 0
     """How many deadlocks it says it has been through (agent.messages.PlanMessage.deadlocks)."""
+    heading: float | None = None
+    """Its yaw as seen (None: not known)."""
 
 
 @dataclass
@@ -109,7 +112,7 @@ class DeadlockWatch:
         ``steering``: a car-like car's (heading, turning radius), whose way there turns
         on that radius (None: a car that turns in place goes straight)."""
         if self.detour is not None:
-            if now < self.detour.until or self._still_needed(now, peers, keep_clear, sdf, wall_clear):
+            if now < self.detour.until or self._still_needed(now, peers, keep_clear, sdf, wall_clear, steering):
                 return self.detour.goal
             if self.detour.for_peer is None:
                 self.been_through += 1  # we gave way, and drove our detour
@@ -157,7 +160,8 @@ class DeadlockWatch:
             if peer.at_goal or peer.waiting or peer.stuck or peer.goal is None or cid not in stuck:
                 continue
             walls = [(tuple(peers[other].position), keep_clear) for other in standing if other != cid]
-            pressed = float(np.linalg.norm(peer.position - position)) < keep_clear
+            pressed = (float(np.linalg.norm(peer.position - position)) < keep_clear
+                       or boxes_in(position, peer, walls, keep_clear, sdf, wall_clear, steering))
             if not pressed and connected(sdf, peer.position, peer.goal, wall_clear,
                                          [*walls, (tuple(position), keep_clear)]):
                 continue
@@ -175,10 +179,11 @@ class DeadlockWatch:
         return None
 
     def _still_needed(self, now: float, peers: dict[int, PeerSeen], keep_clear: float, sdf: SignedDistanceField,
-                      wall_clear: float) -> bool:
+                      wall_clear: float, steering: tuple[float, float] | None = None) -> bool:
         """Whether a step aside holds on: its peer is not at its goal and, were we back
         home, would have no way there past the parked cars and the cars that walled it in
-        with us, where they are now (up to ``Detour.latest``)."""
+        with us, where they are now, or (car-like cars) would be boxed in by us where it
+        stands (up to ``Detour.latest``)."""
         detour = self.detour
         if detour is None or detour.for_peer is None or now >= detour.latest:
             return False
@@ -187,7 +192,8 @@ class DeadlockWatch:
             return False
         walls = [(tuple(p.position), keep_clear) for cid, p in peers.items()
                  if cid != detour.for_peer and (p.at_goal or cid in detour.walls)]
-        return not connected(sdf, peer.position, peer.goal, wall_clear, [*walls, (tuple(detour.home), keep_clear)])
+        return (boxes_in(detour.home, peer, walls, keep_clear, sdf, wall_clear, steering)
+                or not connected(sdf, peer.position, peer.goal, wall_clear, [*walls, (tuple(detour.home), keep_clear)]))
 
 
     def _record(self, now: float, position: np.ndarray, goal: np.ndarray, peers: dict[int, PeerSeen]) -> None:
@@ -256,7 +262,7 @@ def peers_seen(tracks: dict, views: dict, own_id: int, now: float, arrival_radiu
                        and float(np.linalg.norm(plan.positions[-1] - goal)) > arrival_radius_m)
         stuck = bool(view and view.latest is not None and view.latest.stuck)
         deadlocks = view.latest.deadlocks if view is not None and view.latest is not None else 0
-        seen[car_id] = PeerSeen(motion.position, at_goal, waiting, goal, way, halting, stuck, deadlocks)
+        seen[car_id] = PeerSeen(motion.position, at_goal, waiting, goal, way, halting, stuck, deadlocks, motion.yaw)
     return seen
 
 
@@ -314,17 +320,43 @@ def lane(way: np.ndarray, sdf: SignedDistanceField, step: float = LANE_STEP_M) -
     return np.vstack(points)
 
 
+def boxes_in(position: np.ndarray, peer: PeerSeen, walls: list, keep_clear: float, sdf: SignedDistanceField,
+             wall_clear: float, steering: tuple[float, float] | None) -> bool:
+    """Whether a car standing at ``position`` alone boxes a car-like ``peer`` in: every
+    way the peer can set off on (agent.steering.ways_on, at the fleet's turning radius)
+    comes nearer it than ``keep_clear``, a car of ``walls`` ((centre, radius) discs) or a
+    wall nearer than ``wall_clear``, and some way would be open were it not there. A car
+    that cannot turn in place or reverse, stopped close beside a parked car and facing
+    past it, has no way on however open the room is. False for a fleet that turns in
+    place (``steering`` None) or a peer whose heading is not known."""
+    if steering is None or peer.heading is None:
+        return False
+    ways = ways_on(peer.position, peer.heading, steering[1])
+    ours = [(tuple(np.asarray(position, float)), keep_clear)]
+    return not any(_open(way, [*walls, *ours], sdf, wall_clear) for way in ways) and any(
+        _open(way, walls, sdf, wall_clear) for way in ways)
+
+
+def _open(way: np.ndarray, discs: list, sdf: SignedDistanceField, wall_clear: float) -> bool:
+    """Whether the points of ``way`` keep ``wall_clear`` from the walls and out of every
+    (centre, radius) of ``discs``."""
+    if float(np.min(sdf.distance(way))) < wall_clear:
+        return False
+    return all(float(np.min(np.linalg.norm(way - np.asarray(centre), axis=1))) >= radius for centre, radius in discs)
+
+
 def _aside_goal(position: np.ndarray, peer: PeerSeen, parked: list, everyone: list[np.ndarray], distance: float,
                 keep_clear: float, sdf: SignedDistanceField, wall_clear: float,
                 steering: tuple[float, float] | None = None) -> np.ndarray | None:
     """A point ``distance`` from ``position``, reached along a clear segment and
-    ``keep_clear`` off every car seen, from where we no longer wall ``peer`` in (first
-    straight away from it, then turning); None if there is none."""
+    ``keep_clear`` off every car seen, from where we neither wall ``peer`` in nor (car-like
+    cars) box it in (first straight away from it, then turning); None if there is none."""
     others = np.array([p for p in everyone if np.linalg.norm(p - position) > 1e-6]).reshape(-1, 2)
     return _first_clear(position, position - peer.position, DETOUR_TURNS_DEG + (180.0,), distance, others,
                         keep_clear, sdf, wall_clear,
-                        lambda goal: connected(sdf, peer.position, peer.goal, wall_clear,
-                                               [*parked, (tuple(goal), keep_clear)]), steering)
+                        lambda goal: not boxes_in(goal, peer, parked, keep_clear, sdf, wall_clear, steering)
+                        and connected(sdf, peer.position, peer.goal, wall_clear, [*parked, (tuple(goal), keep_clear)]),
+                        steering)
 
 
 def _first_clear(position: np.ndarray, away: np.ndarray, turns: tuple[float, ...], distance: float,

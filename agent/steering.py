@@ -10,6 +10,8 @@ of at least R_min, and never reverses. Three questions come up again and again:
 * :func:`turning_excess` -- does a path turn tighter than a car starting at a heading can
   drive (verification): along the path's arc length s its heading phi(s), the car's own
   at s = 0, must keep |phi(s_b) - phi(s_a)| <= (s_b - s_a) / R + slack for every s_a < s_b;
+* :func:`ways_on` -- which ways a car that stands can set off on at all (a car boxed in
+  by cars that stand: agent.deadlock);
 * :func:`initial_headings` -- the heading variables a plan's support states start from in
   the factor graph (agent.heading_factors); :func:`held_to` -- what a car's plans and
   detours are held to.
@@ -80,6 +82,22 @@ def turn_then(way: np.ndarray, heading: float, radius: float) -> np.ndarray:
     beyond = np.flatnonzero(np.linalg.norm(way - way[0], axis=1) > 2.0 * radius)
     first = int(beyond[0]) if len(beyond) else len(way) - 1
     return np.vstack([way[:1], departure_arc(way[0], heading, way[first], radius), way[first:]])
+
+
+def ways_on(position: np.ndarray, heading: float, radius: float, step_m: float = 0.02) -> list[np.ndarray]:
+    """The three ways a car-like car standing at ``position``, facing ``heading``, can set
+    off on: a quarter turn left and one right at ``radius``, and straight on for the width
+    of its turning circle -- each points (k, 2) every ``step_m``, ``position`` left out.
+    A car none of them is open to cannot move without coming nearer what blocks them: it
+    can neither turn in place nor back away."""
+    position = np.asarray(position, float)
+    forward = np.array([math.cos(heading), math.sin(heading)])
+    left = np.array([-forward[1], forward[0]])
+    straight = position + np.arange(1, int(math.ceil(2.0 * radius / step_m)) + 1)[:, None] * step_m * forward
+    turned = np.arange(1, int(math.ceil(0.5 * math.pi * radius / step_m)) + 1) * step_m / radius  # rad
+    arcs = [position + radius * (np.sin(turned)[:, None] * forward + side * (1.0 - np.cos(turned))[:, None] * left)
+            for side in (1.0, -1.0)]
+    return [*arcs, straight]
 
 
 def turning_excess(points: np.ndarray, heading: float | None, radius: float, slack_rad: float,
