@@ -1,7 +1,7 @@
 """Geometry of a car that steers its front wheels: the turns it can make, and the paths it cannot.
 
 A car-like car (VehicleConfig.steering = "car") turns only while it moves, on a radius
-of at least R_min, and never reverses. Three questions come up again and again:
+of at least R_min, and never reverses. These questions come up again and again:
 
 * :func:`departure_arc` -- which turn takes a car standing at a heading round to face a
   point (the start of a cold plan, a detour): a circular arc at radius R towards the side
