@@ -10,7 +10,8 @@ at absolute times t_i = t0 + i*dt:
                  speed limit, lane and consistency (agent.factors), at each support state
                  and between them (agent.interval_factors)
   car-like       a heading per support state, its start at the car's yaw, no sliding, no
-                 reversing, no curve tighter than the turning radius (agent.heading_factors)
+                 reversing, no curve tighter than the turning radius (agent.heading_factors),
+                 and room to turn away from the peers ahead (agent.turn_room)
 
 Peers out of reach are left out (:func:`peers_within_reach`); a replan is warm-started
 from the previous plan. docs/design/planner.md.
@@ -34,6 +35,7 @@ from .heading_factors import add_heading_factors, insert_headings
 from .interval_factors import add_batched_checks, add_gtsam_interp_checks
 from .routes import path_length
 from .steering import departure_arc, initial_headings
+from .turn_room import add_turn_room_factors
 from .world import SignedDistanceField
 
 
@@ -194,8 +196,11 @@ def build_graph(request: PlanRequest, config: PlannerConfig, sdf: SignedDistance
     else:
         add_gtsam_interp_checks(graph, problem, config, states, qc)
     if request.car_like:
-        add_heading_factors(graph, n, dt, 1.0 / planned_turn_radius(request, config), request.heading,
+        radius = planned_turn_radius(request, config)
+        add_heading_factors(graph, n, dt, 1.0 / radius, request.heading,
                             config.intervals_per_factor, config.sigma_sideways, config.sigma_turning)
+        add_turn_room_factors(graph, problem.peer_positions[:, 0], problem.epsilons, radius,
+                              config.intervals_per_factor, config.sigma_turn_room)
     return graph
 
 

@@ -63,6 +63,10 @@ class PlannerConfig:
     """Car-like cars: sigma of the row that keeps a plan's turn within what it moves (no
     curve tighter than the turning radius), and of the prior that starts it at the car's
     yaw, in rad."""
+    sigma_turn_room: float = 0.02
+    """Car-like cars: sigma of the row that keeps a plan the room to turn away from a peer
+    ahead (agent.turn_room), in m: twice the proximity sigma, so that where both cannot
+    hold the berth wins."""
     turn_radius_margin: float = 0.15
     """Car-like cars: a plan turns on at least the vehicle's min_turn_radius_m times (1 +
     this), so that the tracker keeps steering to spare for its corrections."""
@@ -111,7 +115,7 @@ class PlannerConfig:
             "qc", "min_horizon_s", "cruise_speed_mps", "max_speed_mps", "sigma_start",
             "sigma_start_velocity", "sigma_goal", "sigma_goal_velocity", "sigma_obstacle",
             "sigma_proximity", "sigma_consistency", "sigma_speed", "sigma_lane", "reach_margin_m", "relative_error_tol", "absolute_error_tol", "lambda_initial",
-            "sigma_sideways", "sigma_turning",
+            "sigma_sideways", "sigma_turning", "sigma_turn_room",
         ):
             positive(getattr(self, name), f"{path}.{name}")
         if self.lambda_factor <= 1.0:

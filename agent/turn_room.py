@@ -1,0 +1,99 @@
+"""Turning room: a car-like plan keeps the room to turn away from the peers ahead of it.
+
+A car that cannot turn in place or reverse leaves a peer that stands in front of it only
+along an arc. From a position p at heading theta, a peer at q (offset delta = q - p,
+distance d, a = delta . h along the heading h = (cos theta, sin theta), b = delta . n across
+it, n = (-sin theta, cos theta)) comes nearest the full-lock turn away from it at
+
+  room = sqrt(d^2 + 2 R |b| + R^2) - R      when the peer is ahead (a > 0),
+  room = d                                   when it is beside or behind (a <= 0),
+
+the distance from q to the turning circle of radius R whose centre lies R to the side
+away from the peer (|q - c|^2 = d^2 + 2 R |b| + R^2). The two agree at a = 0 (|b| = d),
+and room <= d. Head on (b = 0) a car needs d >= sqrt(eps^2 + 2 eps R) to keep eps on its
+way round; proximity alone keeps only d >= eps, and two cars that close nose to nose
+have no way on that keeps their berth (docs/design/safety.md, "Deadlocks").
+
+The row per peer and support state is max(0, eps_ab - room), with the peer's proximity
+epsilon eps_ab: a liveness preference, softer than the proximity hinge
+(``PlannerConfig.sigma_turn_room``), so that where both cannot hold the berth wins. Its
+Jacobian (an active row is -room):
+
+  d room / d p     = -(delta + R s n) / sqrt(S),   s = sign(b) (+1 at b = 0)
+  d room / d theta = -R s a / sqrt(S),              S = d^2 + 2 R |b| + R^2
+  and for a <= 0:  d room / d p = -delta / d,  d room / d theta = 0.
+
+Pure numpy; the factors are GTSAM CustomFactors over (p_i, theta_i), chunked like
+agent.heading_factors. docs/design/planner.md, "Car-like cars".
+"""
+
+from __future__ import annotations
+
+import functools
+
+import gtsam
+import numpy as np
+from gtsam.symbol_shorthand import X, Y
+
+from .interval_factors import chunk_bounds
+
+
+def room_rows(position: np.ndarray, heading: float, peers: np.ndarray, epsilons: np.ndarray,
+              radius: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Rows max(0, eps_j - room_j) of one support state against peers (M, 2).
+
+    Returns the residual (M,), d/dp (M, 2) and d/dtheta (M,)."""
+    delta = np.asarray(peers, float) - np.asarray(position, float)
+    h = np.array([np.cos(heading), np.sin(heading)])
+    n = np.array([-h[1], h[0]])
+    a, b = delta @ h, delta @ n
+    d = np.hypot(delta[:, 0], delta[:, 1])
+    s = np.where(b >= 0.0, 1.0, -1.0)
+    root = np.sqrt(d * d + 2.0 * radius * np.abs(b) + radius * radius)
+    ahead = a > 0.0
+    room = np.where(ahead, root - radius, d)
+    residual = np.maximum(np.asarray(epsilons, float) - room, 0.0)
+    active = (residual > 0.0)[:, None]
+    safe_d = np.maximum(d, 1e-9)[:, None]
+    # the row is eps - room: its derivatives are minus room's
+    d_p = np.where(ahead[:, None], (delta + radius * s[:, None] * n) / root[:, None], delta / safe_d)
+    d_theta = np.where(ahead, radius * s * a / root, 0.0)
+    return residual, np.where(active, d_p, 0.0), np.where(active[:, 0], d_theta, 0.0)
+
+
+def _chunk_error(peers: np.ndarray, epsilons: np.ndarray, radius: float, this: gtsam.CustomFactor,
+                 values: gtsam.Values, H: list[np.ndarray] | None) -> np.ndarray:
+    """peers (k, M, 2): where each peer is at the chunk's k support states."""
+    keys = this.keys()
+    k = len(keys) // 2
+    m = len(epsilons)
+    residual = np.zeros(k * m)
+    if H is not None:
+        for j in range(2 * k):
+            H[j] = np.zeros((k * m, 2 if j < k else 1))
+    for j in range(k):
+        position = values.atVector(keys[j])
+        heading = float(values.atVector(keys[k + j])[0])
+        rows, d_p, d_theta = room_rows(position, heading, peers[j], epsilons, radius)
+        residual[j * m:(j + 1) * m] = rows
+        if H is not None:
+            H[j][j * m:(j + 1) * m] = d_p
+            H[k + j][j * m:(j + 1) * m, 0] = d_theta
+    return residual
+
+
+def add_turn_room_factors(graph: gtsam.NonlinearFactorGraph, peer_positions: np.ndarray, epsilons: np.ndarray,
+                          radius: float, per_factor: int, sigma: float) -> None:
+    """Rows for support states 1 .. n-2 (the first is where the car is, the last its goal)
+    against every peer in the graph: ``peer_positions`` (n-1, M, 2) where each peer's plan
+    has it at support states 0 .. n-2. Nothing without peers."""
+    states = peer_positions.shape[0]
+    m = len(epsilons)
+    if m == 0 or states < 2:
+        return
+    for first, end in chunk_bounds(states - 1, per_factor):
+        span = range(first + 1, end + 1)
+        keys = [X(i) for i in span] + [Y(i) for i in span]
+        graph.add(gtsam.CustomFactor(gtsam.noiseModel.Isotropic.Sigma(len(span) * m, sigma), keys,
+                                     functools.partial(_chunk_error, np.array(peer_positions[first + 1:end + 1]),
+                                                       np.asarray(epsilons, float), radius)))

@@ -1,0 +1,67 @@
+"""Turning room: a car-like plan keeps the room to turn away from a peer ahead
+(agent.turn_room): the geometry, its Jacobians, and what it asks of a plan."""
+
+import math
+
+import numpy as np
+import pytest
+
+from trustfg.agent.config import PlannerConfig, WorldConfig
+from trustfg.agent.gp import Plan
+from trustfg.agent.planner import PeerConstraint, PlanRequest, plan_trajectory
+from trustfg.agent.turn_room import room_rows
+from trustfg.agent.world import build_sdf
+
+R, EPS = 0.345, 0.45
+FAR = 10.0
+"""An epsilon no room reaches: the row is then FAR - room, room itself."""
+
+
+def room(position, heading, peer, radius=R) -> float:
+    return FAR - float(room_rows(np.asarray(position, float), heading, np.asarray([peer], float),
+                                 np.array([FAR]), radius)[0][0])
+
+
+def test_head_on_a_car_needs_the_root_of_eps_squared_plus_two_eps_r():
+    """Head on, the turn away keeps eps from the peer exactly when d = sqrt(eps^2 + 2 eps R):
+    the room is then eps, and less nearer."""
+    d = math.sqrt(EPS ** 2 + 2 * EPS * R)
+    assert room((0.0, 0.0), 0.0, (d, 0.0)) == pytest.approx(EPS, abs=1e-12)
+    assert room((0.0, 0.0), 0.0, (d - 0.05, 0.0)) < EPS - 0.03
+
+
+@pytest.mark.parametrize("bearing", np.linspace(-math.pi, math.pi, 25))
+def test_room_is_the_distance_beside_and_behind_and_never_more(bearing):
+    """A peer beside or behind is left along the way on: room = d; ahead room < d, the more
+    the nearer dead ahead; the turning circle's gap, checked against a sampled circle."""
+    d, heading = 0.6, 0.7
+    peer = d * np.array([math.cos(heading + bearing), math.sin(heading + bearing)])
+    got = room((0.0, 0.0), heading, peer)
+    if math.cos(bearing) <= 0.0:
+        assert got == pytest.approx(d, abs=1e-12)
+        return
+    assert got <= d + 1e-12
+    side = -1.0 if math.sin(bearing) >= 0.0 else 1.0  # the turn away from the peer
+    centre = side * R * np.array([-math.sin(heading), math.cos(heading)])
+    angles = np.linspace(0.0, 2 * math.pi, 20001)
+    circle = centre + R * np.stack([np.cos(angles), np.sin(angles)], axis=1)
+    assert got == pytest.approx(float(np.min(np.hypot(*(circle - peer).T))), abs=1e-6)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_jacobians_match_numerical(seed):
+    rng = np.random.default_rng(seed)
+    position, heading = rng.uniform(-1.0, 1.0, 2), rng.uniform(-4.0, 4.0)
+    peers = position + rng.uniform(-0.7, 0.7, (12, 2))
+    epsilons = np.full(12, 0.6)
+    residual, d_p, d_theta = room_rows(position, heading, peers, epsilons, R)
+    assert np.count_nonzero(residual) >= 4  # the hinges were tried active, not only flat
+    h = 1e-7
+    for axis in range(2):
+        step = np.eye(2)[axis] * h
+        numeric = (room_rows(position + step, heading, peers, epsilons, R)[0]
+                   - room_rows(position - step, heading, peers, epsilons, R)[0]) / (2 * h)
+        assert np.allclose(d_p[:, axis], numeric, atol=1e-6)
+    numeric = (room_rows(position, heading + h, peers, epsilons, R)[0]
+               - room_rows(position, heading - h, peers, epsilons, R)[0]) / (2 * h)
+    assert np.allclose(d_theta, numeric, atol=1e-6)
