@@ -65,3 +65,32 @@ def test_jacobians_match_numerical(seed):
     numeric = (room_rows(position, heading + h, peers, epsilons, R)[0]
                - room_rows(position, heading - h, peers, epsilons, R)[0]) / (2 * h)
     assert np.allclose(d_theta, numeric, atol=1e-6)
+
+
+def _least_room(plan: Plan, peer: np.ndarray, radius: float) -> float:
+    """The least room over the support states between a plan's first and its last, of
+    those that move (a moving state's heading is its direction of motion)."""
+    return min(room(plan.positions[i], math.atan2(plan.velocities[i, 1], plan.velocities[i, 0]), peer, radius)
+               for i in range(1, plan.n - 1) if np.hypot(*plan.velocities[i]) > 0.05)
+
+
+def test_a_car_like_plan_to_a_goal_short_of_a_standing_peer_keeps_its_turning_room():
+    """A goal 0.55 m short of a car that stands ahead, roughly head on: without the rows the
+    plan drives at it and its states keep well under eps of turning room; with them each
+    keeps more, and nearly eps (the rows are soft), in every draw."""
+    sdf = build_sdf(WorldConfig(bounds_m=(-3.0, -3.0, 3.0, 3.0)))
+    min_turn_radius = 0.3
+    radius = min_turn_radius * (1.0 + PlannerConfig().turn_radius_margin)
+    for seed in range(12):
+        rng = np.random.default_rng(seed)
+        goal = np.array([1.5, rng.uniform(-0.2, 0.2)])
+        bearing = rng.uniform(-0.3, 0.3)
+        peer = goal + 0.55 * np.array([math.cos(bearing), math.sin(bearing)])
+        standing = PeerConstraint(Plan(0.0, 10.0, np.array([peer, peer]), np.zeros((2, 2))), EPS)
+        request = PlanRequest(t_now=0.0, position=np.array([-1.0, 0.0]), velocity=np.zeros(2), goal=goal,
+                              t_arrive=8.0, epsilon_obstacle=0.25, lane=((-1.0, 0.0),), peers=(standing,),
+                              steering=(0.0, min_turn_radius))
+        kept = _least_room(plan_trajectory(request, PlannerConfig(), sdf).plan, peer, radius)
+        unkept = _least_room(plan_trajectory(request, PlannerConfig(sigma_turn_room=1e6), sdf).plan, peer, radius)
+        assert kept > unkept + 0.02, (seed, kept, unkept)
+        assert kept > EPS - 0.07, (seed, kept)
