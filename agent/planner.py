@@ -199,7 +199,7 @@ def build_graph(request: PlanRequest, config: PlannerConfig, sdf: SignedDistance
         radius = planned_turn_radius(request, config)
         add_heading_factors(graph, n, dt, 1.0 / radius, request.heading,
                             config.intervals_per_factor, config.sigma_sideways, config.sigma_turning)
-        add_turn_room_factors(graph, problem.peer_positions[:, 0], problem.epsilons, radius,
+        add_turn_room_factors(graph, problem.peer_positions, problem.epsilons, dt, radius,
                               config.intervals_per_factor, config.sigma_turn_room)
     return graph
 

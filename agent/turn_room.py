@@ -15,9 +15,10 @@ way round; proximity alone keeps only d >= eps, and two cars that close nose to 
 have no way on that keeps their berth (docs/design/safety.md, "Deadlocks").
 
 The row per peer and support state is max(0, eps_ab - room), with the peer's proximity
-epsilon eps_ab: a liveness preference, softer than the proximity hinge
-(``PlannerConfig.sigma_turn_room``), so that where both cannot hold the berth wins. Its
-Jacobian (an active row is -room):
+epsilon eps_ab, where the peer's plan stands (slower than ``STANDING_MPS`` from that state
+to the next): a peer that moves on makes its own room, one that stands does not. It is a
+liveness preference, softer than the proximity hinge (``PlannerConfig.sigma_turn_room``),
+so that where both cannot hold the berth wins. Its Jacobian (an active row is -room):
 
   d room / d p     = -(delta + R s n) / sqrt(S),   s = sign(b) (+1 at b = 0)
   d room / d theta = -R s a / sqrt(S),              S = d^2 + 2 R |b| + R^2
@@ -36,6 +37,9 @@ import numpy as np
 from gtsam.symbol_shorthand import X, Y
 
 from .interval_factors import chunk_bounds
+
+STANDING_MPS = 0.02
+"""A peer whose plan moves slower than this over an interval stands there."""
 
 
 def room_rows(position: np.ndarray, heading: float, peers: np.ndarray, epsilons: np.ndarray,
@@ -63,10 +67,11 @@ def room_rows(position: np.ndarray, heading: float, peers: np.ndarray, epsilons:
 
 def _chunk_error(peers: np.ndarray, epsilons: np.ndarray, radius: float, this: gtsam.CustomFactor,
                  values: gtsam.Values, H: list[np.ndarray] | None) -> np.ndarray:
-    """peers (k, M, 2): where each peer is at the chunk's k support states."""
+    """peers (k, M, 2): where each peer is at the chunk's k support states; ``epsilons``
+    (k, M): each peer's epsilon there, 0 where it moves (the row is then 0)."""
     keys = this.keys()
     k = len(keys) // 2
-    m = len(epsilons)
+    m = epsilons.shape[1]
     residual = np.zeros(k * m)
     if H is not None:
         for j in range(2 * k):
@@ -74,7 +79,7 @@ def _chunk_error(peers: np.ndarray, epsilons: np.ndarray, radius: float, this: g
     for j in range(k):
         position = values.atVector(keys[j])
         heading = float(values.atVector(keys[k + j])[0])
-        rows, d_p, d_theta = room_rows(position, heading, peers[j], epsilons, radius)
+        rows, d_p, d_theta = room_rows(position, heading, peers[j], epsilons[j], radius)
         residual[j * m:(j + 1) * m] = rows
         if H is not None:
             H[j][j * m:(j + 1) * m] = d_p
@@ -83,17 +88,26 @@ def _chunk_error(peers: np.ndarray, epsilons: np.ndarray, radius: float, this: g
 
 
 def add_turn_room_factors(graph: gtsam.NonlinearFactorGraph, peer_positions: np.ndarray, epsilons: np.ndarray,
-                          radius: float, per_factor: int, sigma: float) -> None:
+                          dt: float, radius: float, per_factor: int, sigma: float) -> None:
     """Rows for support states 1 .. n-2 (the first is where the car is, the last its goal)
-    against every peer in the graph: ``peer_positions`` (n-1, M, 2) where each peer's plan
-    has it at support states 0 .. n-2. Nothing without peers."""
-    states = peer_positions.shape[0]
-    m = len(epsilons)
-    if m == 0 or states < 2:
+    against every peer of the graph that stands there: ``peer_positions`` (n-1, K, M, 2)
+    where each peer's plan has it at the checks of intervals 0 .. n-2 (check 0: the support
+    state; agent.planner.interval_problem), ``dt`` the support states' spacing. Nothing
+    without peers."""
+    states, checks, m = peer_positions.shape[0], peer_positions.shape[1], len(epsilons)
+    if m == 0 or states < 2 or checks < 2:
+        return
+    # the mean speed from each support state to the interval's last check
+    span = dt * (checks - 1) / checks
+    speed = np.linalg.norm(peer_positions[:, -1] - peer_positions[:, 0], axis=2) / span  # (n-1, M)
+    standing = np.where(speed < STANDING_MPS, np.asarray(epsilons, float)[None, :], 0.0)
+    if not np.any(standing[1:] > 0.0):
         return
     for first, end in chunk_bounds(states - 1, per_factor):
-        span = range(first + 1, end + 1)
-        keys = [X(i) for i in span] + [Y(i) for i in span]
-        graph.add(gtsam.CustomFactor(gtsam.noiseModel.Isotropic.Sigma(len(span) * m, sigma), keys,
-                                     functools.partial(_chunk_error, np.array(peer_positions[first + 1:end + 1]),
-                                                       np.asarray(epsilons, float), radius)))
+        if not np.any(standing[first + 1:end + 1] > 0.0):
+            continue
+        span_keys = range(first + 1, end + 1)
+        keys = [X(i) for i in span_keys] + [Y(i) for i in span_keys]
+        graph.add(gtsam.CustomFactor(gtsam.noiseModel.Isotropic.Sigma(len(span_keys) * m, sigma), keys,
+                                     functools.partial(_chunk_error, np.array(peer_positions[first + 1:end + 1, 0]),
+                                                       standing[first + 1:end + 1], radius)))

@@ -3,13 +3,14 @@
 
 import math
 
+import gtsam
 import numpy as np
 import pytest
 
 from trustfg.agent.config import PlannerConfig, WorldConfig
 from trustfg.agent.gp import Plan
 from trustfg.agent.planner import PeerConstraint, PlanRequest, plan_trajectory
-from trustfg.agent.turn_room import room_rows
+from trustfg.agent.turn_room import STANDING_MPS, add_turn_room_factors, room_rows
 from trustfg.agent.world import build_sdf
 
 R, EPS = 0.345, 0.45
@@ -94,3 +95,21 @@ def test_a_car_like_plan_to_a_goal_short_of_a_standing_peer_keeps_its_turning_ro
         unkept = _least_room(plan_trajectory(request, PlannerConfig(sigma_turn_room=1e6), sdf).plan, peer, radius)
         assert kept > unkept + 0.02, (seed, kept, unkept)
         assert kept > EPS - 0.07, (seed, kept)
+
+
+def test_rows_stand_against_peers_that_stand_only():
+    """A peer whose plan moves on makes its own room: no rows against it; one that stands
+    (or creeps slower than STANDING_MPS) gets them where it stands."""
+    n, checks, dt = 9, 5, 0.5
+    t = (np.arange(n - 1)[:, None] + np.arange(checks)[None, :] / checks) * dt  # (I, K)
+
+    def rows_against(speed: float) -> int:
+        positions = np.stack([1.0 + speed * t, np.zeros_like(t)], axis=-1)[:, :, None, :]  # (I, K, 1, 2)
+        graph = gtsam.NonlinearFactorGraph()
+        add_turn_room_factors(graph, positions, np.array([EPS]), dt, R, 4, 0.02)
+        return graph.size()
+
+    assert rows_against(0.3) == 0
+    assert rows_against(-0.3) == 0
+    assert rows_against(0.0) == 2  # states 1..7 in chunks of 4
+    assert rows_against(0.5 * STANDING_MPS) == 2
