@@ -1,31 +1,21 @@
-"""Turning room: a car-like plan keeps the room to turn away from the peers ahead of it.
+"""Turning room: a car-like plan keeps the room to turn away from a peer that stands ahead.
 
-A car that cannot turn in place or reverse leaves a peer that stands in front of it only
-along an arc. From a position p at heading theta, a peer at q (offset delta = q - p,
-distance d, a = delta . h along the heading h = (cos theta, sin theta), b = delta . n across
-it, n = (-sin theta, cos theta)) comes nearest the full-lock turn away from it at
+A car that cannot turn in place or reverse leaves a peer in front of it only along an
+arc. From p at heading theta, a peer at q (delta = q - p, distance d, a and b its parts
+along and across the heading) is nearest the full-lock turn away from it at
 
-  room = sqrt(d^2 + 2 R |b| + R^2) - R      when the peer is ahead (a > 0),
-  room = d                                   when it is beside or behind (a <= 0),
+  room = sqrt(d^2 + 2 R |b| + R^2) - R      ahead (a > 0),
+  room = d                                   beside or behind (a <= 0),
 
-the distance from q to the turning circle of radius R whose centre lies R to the side
-away from the peer (|q - c|^2 = d^2 + 2 R |b| + R^2). The two agree at a = 0 (|b| = d),
-and room <= d. Head on (b = 0) a car needs d >= sqrt(eps^2 + 2 eps R) to keep eps on its
-way round; proximity alone keeps only d >= eps, and two cars that close nose to nose
-have no way on that keeps their berth (docs/design/safety.md, "Deadlocks").
-
-The row per peer and support state is max(0, eps_ab - room), with the peer's proximity
-epsilon eps_ab, where the peer's plan stands (slower than ``STANDING_MPS`` from that state
-to the next): a peer that moves on makes its own room, one that stands does not. It is a
-liveness preference, softer than the proximity hinge (``PlannerConfig.sigma_turn_room``),
-so that where both cannot hold the berth wins. Its Jacobian (an active row is -room):
-
-  d room / d p     = -(delta + R s n) / sqrt(S),   s = sign(b) (+1 at b = 0)
-  d room / d theta = -R s a / sqrt(S),              S = d^2 + 2 R |b| + R^2
-  and for a <= 0:  d room / d p = -delta / d,  d room / d theta = 0.
+the gap from q to the circle of radius R centred R to the side away from the peer; the
+two agree at a = 0, and room <= d. Head on a car needs d >= sqrt(eps^2 + 2 eps R) to keep
+eps on its way round, where proximity keeps only eps. The row per peer and support state
+is max(0, eps_ab - room) where the peer's plan stands (slower than ``STANDING_MPS``): a
+peer that moves on makes its own room. A liveness preference, softer than the proximity
+hinge (``PlannerConfig.sigma_turn_room``), so that where both cannot hold the berth wins.
 
 Pure numpy; the factors are GTSAM CustomFactors over (p_i, theta_i), chunked like
-agent.heading_factors. docs/design/planner.md, "Car-like cars".
+agent.heading_factors. docs/design/planner.md, "Car-like cars" (turning room).
 """
 
 from __future__ import annotations
@@ -46,7 +36,12 @@ def room_rows(position: np.ndarray, heading: float, peers: np.ndarray, epsilons:
               radius: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Rows max(0, eps_j - room_j) of one support state against peers (M, 2).
 
-    Returns the residual (M,), d/dp (M, 2) and d/dtheta (M,)."""
+    Returns the residual (M,), d/dp (M, 2) and d/dtheta (M,). With n the unit normal left
+    of the heading, s = sign(b) (+1 at b = 0) and S = d^2 + 2 R |b| + R^2, an active row
+    is -room and
+
+      d room / d p = -(delta + R s n) / sqrt(S),   d room / d theta = -R s a / sqrt(S)
+      (a <= 0:  d room / d p = -delta / d,         d room / d theta = 0)."""
     delta = np.asarray(peers, float) - np.asarray(position, float)
     h = np.array([np.cos(heading), np.sin(heading)])
     n = np.array([-h[1], h[0]])
