@@ -65,8 +65,8 @@ class PlannerConfig:
     yaw, in rad."""
     sigma_turn_room: float = 0.02
     """Car-like cars: sigma of the row that keeps a plan the room to turn away from a peer
-    ahead (agent.turn_room), in m: twice the proximity sigma, so that where both cannot
-    hold the berth wins."""
+    that stands ahead (agent.turn_room), in m: twice the proximity sigma, so that where
+    both cannot hold the berth wins."""
     turn_radius_margin: float = 0.15
     """Car-like cars: a plan turns on at least the vehicle's min_turn_radius_m times (1 +
     this), so that the tracker keeps steering to spare for its corrections."""
