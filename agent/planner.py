@@ -11,7 +11,7 @@ at absolute times t_i = t0 + i*dt:
                  and between them (agent.interval_factors)
   car-like       a heading per support state, its start at the car's yaw, no sliding, no
                  reversing, no curve tighter than the turning radius (agent.heading_factors),
-                 and room to turn away from the peers ahead (agent.turn_room)
+                 and (``turn_room``) room to turn away from a peer that stands ahead (agent.turn_room)
 
 Peers out of reach are left out (:func:`peers_within_reach`); a replan is warm-started
 from the previous plan. docs/design/planner.md.
@@ -199,8 +199,9 @@ def build_graph(request: PlanRequest, config: PlannerConfig, sdf: SignedDistance
         radius = planned_turn_radius(request, config)
         add_heading_factors(graph, n, dt, 1.0 / radius, request.heading,
                             config.intervals_per_factor, config.sigma_sideways, config.sigma_turning)
-        add_turn_room_factors(graph, problem.peer_positions, problem.epsilons, dt, radius,
-                              config.intervals_per_factor, config.sigma_turn_room)
+        if config.turn_room:
+            add_turn_room_factors(graph, problem.peer_positions, problem.epsilons, dt, radius,
+                                  config.intervals_per_factor, config.sigma_turn_room)
     return graph
 
 

@@ -63,10 +63,13 @@ class PlannerConfig:
     """Car-like cars: sigma of the row that keeps a plan's turn within what it moves (no
     curve tighter than the turning radius), and of the prior that starts it at the car's
     yaw, in rad."""
+    turn_room: bool = False
+    """Car-like cars: rows that keep a plan the room to turn away from a peer that stands
+    ahead (agent.turn_room). Off by default: on the car-like bank they move deadlocks
+    between seeds rather than remove them (docs/design/planner.md, "Car-like cars")."""
     sigma_turn_room: float = 0.02
-    """Car-like cars: sigma of the row that keeps a plan the room to turn away from a peer
-    that stands ahead (agent.turn_room), in m: twice the proximity sigma, so that where
-    both cannot hold the berth wins."""
+    """Car-like cars with ``turn_room``: sigma of its rows, in m: twice the proximity
+    sigma, so that where both cannot hold the berth wins."""
     turn_radius_margin: float = 0.15
     """Car-like cars: a plan turns on at least the vehicle's min_turn_radius_m times (1 +
     this), so that the tracker keeps steering to spare for its corrections."""

@@ -76,9 +76,9 @@ def _least_room(plan: Plan, peer: np.ndarray, radius: float) -> float:
 
 
 def test_a_car_like_plan_to_a_goal_short_of_a_standing_peer_keeps_its_turning_room():
-    """A goal 0.55 m short of a car that stands ahead, roughly head on: without the rows the
-    plan drives at it and its states keep well under eps of turning room; with them each
-    keeps more, and nearly eps (the rows are soft), in every draw."""
+    """A goal 0.55 m short of a car that stands ahead, roughly head on: without the rows (the
+    default) the plan drives at it and its states keep well under eps of turning room; with
+    them each keeps more, and nearly eps (the rows are soft), in every draw."""
     sdf = build_sdf(WorldConfig(bounds_m=(-3.0, -3.0, 3.0, 3.0)))
     min_turn_radius = 0.3
     radius = min_turn_radius * (1.0 + PlannerConfig().turn_radius_margin)
@@ -91,8 +91,8 @@ def test_a_car_like_plan_to_a_goal_short_of_a_standing_peer_keeps_its_turning_ro
         request = PlanRequest(t_now=0.0, position=np.array([-1.0, 0.0]), velocity=np.zeros(2), goal=goal,
                               t_arrive=8.0, epsilon_obstacle=0.25, lane=((-1.0, 0.0),), peers=(standing,),
                               steering=(0.0, min_turn_radius))
-        kept = _least_room(plan_trajectory(request, PlannerConfig(), sdf).plan, peer, radius)
-        unkept = _least_room(plan_trajectory(request, PlannerConfig(sigma_turn_room=1e6), sdf).plan, peer, radius)
+        kept = _least_room(plan_trajectory(request, PlannerConfig(turn_room=True), sdf).plan, peer, radius)
+        unkept = _least_room(plan_trajectory(request, PlannerConfig(), sdf).plan, peer, radius)
         assert kept > unkept + 0.02, (seed, kept, unkept)
         assert kept > EPS - 0.07, (seed, kept)
 
