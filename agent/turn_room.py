@@ -10,7 +10,7 @@ along and across the heading) is nearest the full-lock turn away from it at
 the gap from q to the circle of radius R centred R to the side away from the peer; the
 two agree at a = 0, and room <= d. Head on a car needs d >= sqrt(eps^2 + 2 eps R) to keep
 eps on its way round, where proximity keeps only eps. The row per peer and support state
-is max(0, eps_ab - room) where the peer's plan stands (slower than ``STANDING_MPS``): a
+is max(0, eps_ab - room) where the peer's plan stands (slower than ``MOVING_MPS``): a
 peer that moves on makes its own room. A liveness preference, softer than the proximity
 hinge (``PlannerConfig.sigma_turn_room``), so that where both cannot hold the berth wins.
 
@@ -27,9 +27,7 @@ import numpy as np
 from gtsam.symbol_shorthand import X, Y
 
 from .interval_factors import chunk_bounds
-
-STANDING_MPS = 0.02
-"""A peer whose plan moves slower than this over an interval stands there."""
+from .steering import MOVING_MPS  # a plan slower than this does not move: a peer's plan stands
 
 
 def room_rows(position: np.ndarray, heading: float, peers: np.ndarray, epsilons: np.ndarray,
@@ -95,7 +93,7 @@ def add_turn_room_factors(graph: gtsam.NonlinearFactorGraph, peer_positions: np.
     # the mean speed from each support state to the interval's last check
     span = dt * (checks - 1) / checks
     speed = np.linalg.norm(peer_positions[:, -1] - peer_positions[:, 0], axis=2) / span  # (n-1, M)
-    standing = np.where(speed < STANDING_MPS, np.asarray(epsilons, float)[None, :], 0.0)
+    standing = np.where(speed < MOVING_MPS, np.asarray(epsilons, float)[None, :], 0.0)
     if not np.any(standing[1:] > 0.0):
         return
     for first, end in chunk_bounds(states - 1, per_factor):

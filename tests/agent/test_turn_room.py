@@ -9,8 +9,9 @@ import pytest
 
 from trustfg.agent.config import PlannerConfig, WorldConfig
 from trustfg.agent.gp import Plan
-from trustfg.agent.planner import PeerConstraint, PlanRequest, plan_trajectory
-from trustfg.agent.turn_room import STANDING_MPS, add_turn_room_factors, room_rows
+from trustfg.agent.planner import PeerConstraint, PlanRequest, plan_trajectory, planned_turn_radius
+from trustfg.agent.steering import MOVING_MPS
+from trustfg.agent.turn_room import add_turn_room_factors, room_rows
 from trustfg.agent.world import build_sdf
 
 R, EPS = 0.345, 0.45
@@ -81,7 +82,6 @@ def test_a_car_like_plan_to_a_goal_short_of_a_standing_peer_keeps_its_turning_ro
     them each keeps more, and nearly eps (the rows are soft), in every draw."""
     sdf = build_sdf(WorldConfig(bounds_m=(-3.0, -3.0, 3.0, 3.0)))
     min_turn_radius = 0.3
-    radius = min_turn_radius * (1.0 + PlannerConfig().turn_radius_margin)
     for seed in range(12):
         rng = np.random.default_rng(seed)
         goal = np.array([1.5, rng.uniform(-0.2, 0.2)])
@@ -91,6 +91,7 @@ def test_a_car_like_plan_to_a_goal_short_of_a_standing_peer_keeps_its_turning_ro
         request = PlanRequest(t_now=0.0, position=np.array([-1.0, 0.0]), velocity=np.zeros(2), goal=goal,
                               t_arrive=8.0, epsilon_obstacle=0.25, lane=((-1.0, 0.0),), peers=(standing,),
                               steering=(0.0, min_turn_radius))
+        radius = planned_turn_radius(request, PlannerConfig())
         kept = _least_room(plan_trajectory(request, PlannerConfig(turn_room=True), sdf).plan, peer, radius)
         unkept = _least_room(plan_trajectory(request, PlannerConfig(), sdf).plan, peer, radius)
         assert kept > unkept + 0.02, (seed, kept, unkept)
@@ -99,7 +100,7 @@ def test_a_car_like_plan_to_a_goal_short_of_a_standing_peer_keeps_its_turning_ro
 
 def test_rows_stand_against_peers_that_stand_only():
     """A peer whose plan moves on makes its own room: no rows against it; one that stands
-    (or creeps slower than STANDING_MPS) gets them where it stands."""
+    (or creeps slower than MOVING_MPS) gets them where it stands."""
     n, checks, dt = 9, 5, 0.5
     t = (np.arange(n - 1)[:, None] + np.arange(checks)[None, :] / checks) * dt  # (I, K)
 
@@ -112,4 +113,4 @@ def test_rows_stand_against_peers_that_stand_only():
     assert rows_against(0.3) == 0
     assert rows_against(-0.3) == 0
     assert rows_against(0.0) == 2  # states 1..7 in chunks of 4
-    assert rows_against(0.5 * STANDING_MPS) == 2
+    assert rows_against(0.5 * MOVING_MPS) == 2
