@@ -128,19 +128,27 @@ def test_a_release_right_after_another_sessions_e_stop_sticks(fresh):
     """The e-stop's direct repeats (0.5 s) are still in flight when another operator
     process releases the cars: they must not latch the cars again."""
     fleet = fresh
-    start_and_wait_moving(fleet)
-    stopped = time.time()
-    fleet.session.estop()  # this session repeats its E_STOPs on the links for 0.5 s
-    result = trustfg("stop", "--config", str(fleet.config), "--release")
-    assert time.time() - stopped < 2.0
-    assert result.returncode == 0 and result.stdout.count("not latched") == 4, result.stdout + result.stderr
-    time.sleep(1.5)
-    assert all(seen.state == "waiting" for seen in fleet.session.cars.values()), fleet.states()
-    asked = time.time()
-    fleet.session.stopper.ping(fleet.ids)  # the cars themselves: not latched
-    stopper = fleet.session.stopper
-    assert wait_for(lambda: all(stopper.answered_at.get(car, 0) > asked for car in fleet.ids), 2.0)
-    assert not any(stopper.answers[car].e_stop_latched for car in fleet.ids)
+    took = []
+    while len(took) < 3 and not (took and min(took) < 2.0):
+        # A loaded machine can start the releasing process too late to race the repeats:
+        # then the trial is run again (the outcome must hold every time).
+        if took:
+            fleet.control({"reset": True})
+            time.sleep(0.3)
+        start_and_wait_moving(fleet)
+        stopped = time.time()
+        fleet.session.estop()  # this session repeats its E_STOPs on the links for 0.5 s
+        result = trustfg("stop", "--config", str(fleet.config), "--release")
+        took.append(time.time() - stopped)
+        assert result.returncode == 0 and result.stdout.count("not latched") == 4, result.stdout + result.stderr
+        time.sleep(1.5)
+        assert all(seen.state == "waiting" for seen in fleet.session.cars.values()), fleet.states()
+        asked = time.time()
+        fleet.session.stopper.ping(fleet.ids)  # the cars themselves: not latched
+        stopper = fleet.session.stopper
+        assert wait_for(lambda: all(stopper.answered_at.get(car, 0) > asked for car in fleet.ids), 2.0)
+        assert not any(stopper.answers[car].e_stop_latched for car in fleet.ids)
+    assert min(took) < 2.0, took  # at least once the release came while the e-stop repeated
 
 
 def test_killing_the_operators_heartbeat_stops_every_car_within_the_deadman(fresh):
