@@ -11,7 +11,8 @@ at absolute times t_i = t0 + i*dt:
                  and between them (agent.interval_factors)
   car-like       a heading per support state, its start at the car's yaw, no sliding, no
                  reversing, no curve tighter than the turning radius (agent.heading_factors),
-                 and (``turn_room``) room to turn away from a peer that stands ahead (agent.turn_room)
+                 (``turn_room``) room to turn away from a peer that stands ahead (agent.turn_room),
+                 and (``keep_right_m``) peers it closes on seen to the left (agent.keep_right)
 
 Peers out of reach are left out (:func:`peers_within_reach`); a replan is warm-started
 from the previous plan. docs/design/planner.md.
@@ -21,6 +22,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import math
 import time
 from dataclasses import dataclass
 
@@ -33,8 +35,9 @@ from .config import PlannerConfig
 from .gp import Plan, interpolation_weights
 from .heading_factors import add_heading_factors, insert_headings
 from .interval_factors import add_batched_checks, add_gtsam_interp_checks
+from .keep_right import keep_right
 from .routes import path_length
-from .steering import departure_arc, initial_headings
+from .steering import MOVING_MPS, departure_arc, initial_headings
 from .turn_room import add_turn_room_factors
 from .world import SignedDistanceField
 
@@ -222,6 +225,8 @@ def interval_problem(request: PlanRequest, config: PlannerConfig, sdf: SignedDis
     if near:
         peer_positions = np.stack([positions for _, positions in near], axis=2)
         epsilons = np.array([peer.epsilon for peer, _ in near])
+        if request.car_like and config.keep_right_m > 0:
+            peer_positions, epsilons = _kept_right(request, config, check_times, near, peer_positions, epsilons)
     else:
         peer_positions = np.zeros((n - 1, len(fractions), 0, 2))
         epsilons = np.zeros(0)
@@ -277,6 +282,26 @@ def peers_within_reach(peers: tuple[PeerConstraint, ...], position: np.ndarray, 
         if gaps[0] < reach + 2.0 * v * (t_end - t0) or np.any(gaps < reach + travel):
             kept.append((peer, positions.reshape(*check_times.shape, 2)))
     return kept
+
+
+def _kept_right(request: PlanRequest, config: PlannerConfig, check_times: np.ndarray,
+                near: list[tuple[PeerConstraint, np.ndarray]], peer_positions: np.ndarray,
+                epsilons: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The near peers as a car-like plan sees them under the keep-right convention
+    (agent.keep_right), judged on our previous plan (or, cold, where we are and head)."""
+    times = check_times.ravel()
+    shape = (*check_times.shape, 2)
+    if request.warm_start is not None:
+        positions, velocities = request.warm_start.state_at(times)
+    else:
+        positions = np.broadcast_to(request.position, (len(times), 2))
+        velocities = np.broadcast_to(request.velocity, (len(times), 2))
+    speed = np.linalg.norm(velocities, axis=1, keepdims=True)
+    heading = np.array([math.cos(request.heading), math.sin(request.heading)])
+    directions = np.where(speed >= MOVING_MPS, velocities / np.maximum(speed, 1e-9), heading)
+    peer_velocities = np.stack([peer.plan.state_at(times)[1].reshape(shape) for peer, _ in near], axis=2)
+    return keep_right(positions.reshape(shape), directions.reshape(shape), velocities.reshape(shape),
+                      peer_positions, peer_velocities, epsilons, config.keep_right_m)
 
 
 def route_segments(request: PlanRequest) -> np.ndarray:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from .checks import ConfigError, positive
@@ -70,6 +71,9 @@ class PlannerConfig:
     sigma_turn_room: float = 0.02
     """Car-like cars with ``turn_room``: sigma of its rows, in m: twice the proximity
     sigma, so that where both cannot hold the berth wins."""
+    keep_right_m: float = 0.0
+    """Car-like cars: a peer a plan closes on ahead is seen this far left of the line of
+    sight, so that both turn right and pass (agent.keep_right), in m; 0: off."""
     turn_radius_margin: float = 0.15
     """Car-like cars: a plan turns on at least the vehicle's min_turn_radius_m times (1 +
     this), so that the tracker keeps steering to spare for its corrections."""
@@ -127,6 +131,8 @@ class PlannerConfig:
             raise ConfigError(f"{path}.intervals_per_factor: must be >= 1")
         if self.turn_radius_margin < 0:
             raise ConfigError(f"{path}.turn_radius_margin: must be >= 0")
+        if not (self.keep_right_m >= 0 and math.isfinite(self.keep_right_m)):
+            raise ConfigError(f"{path}.keep_right_m: must be a finite number >= 0")
         if self.max_iterations < 1:
             raise ConfigError(f"{path}.max_iterations: must be >= 1")
         if self.interpolation not in ("batched", "gtsam"):
