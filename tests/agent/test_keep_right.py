@@ -99,3 +99,17 @@ def test_head_on_a_car_like_plan_passes_the_peer_on_its_left():
                 assert least > EPS - 0.03, (seed, least)
     assert all(side > 0 for side in sides[OFFSET]), sides
     assert sum(side < 0 for side in sides[0.0]) >= 8, sides
+
+
+def test_a_car_that_turns_in_place_plans_as_without_it():
+    """It can turn away on the spot: its graph never sees peers shifted."""
+    sdf = build_sdf(WorldConfig(bounds_m=(-3.0, -3.0, 3.0, 3.0)))
+    times = np.linspace(0.0, 8.0, 9)
+    peer = Plan(0.0, 1.0, np.stack([1.5 - 0.35 * times, np.zeros(9)], axis=1), np.tile([-0.35, 0.0], (9, 1)))
+    request = PlanRequest(t_now=0.0, position=np.array([-1.5, 0.01]), velocity=np.zeros(2),
+                          goal=np.array([1.5, 0.01]), t_arrive=8.0, epsilon_obstacle=0.25,
+                          peers=(PeerConstraint(peer, EPS),))
+    kept = plan_trajectory(request, PlannerConfig(keep_right_m=OFFSET), sdf).plan
+    plain = plan_trajectory(request, PlannerConfig(), sdf).plan
+    np.testing.assert_array_equal(kept.positions, plain.positions)
+    np.testing.assert_array_equal(kept.velocities, plain.velocities)
