@@ -71,9 +71,10 @@ class PlannerConfig:
     sigma_turn_room: float = 0.02
     """Car-like cars with ``turn_room``: sigma of its rows, in m: twice the proximity
     sigma, so that where both cannot hold the berth wins."""
-    keep_right_m: float = 0.0
+    keep_right_m: float = 0.1
     """Car-like cars: a peer a plan closes on ahead is seen this far left of the line of
-    sight, so that both turn right and pass (agent.keep_right), in m; 0: off."""
+    sight, so that both turn right and pass instead of closing nose to nose
+    (agent.keep_right), in m; 0: off. Cars that turn in place never use it."""
     turn_radius_margin: float = 0.15
     """Car-like cars: a plan turns on at least the vehicle's min_turn_radius_m times (1 +
     this), so that the tracker keeps steering to spare for its corrections."""

@@ -110,6 +110,6 @@ def test_a_car_that_turns_in_place_plans_as_without_it():
                           goal=np.array([1.5, 0.01]), t_arrive=8.0, epsilon_obstacle=0.25,
                           peers=(PeerConstraint(peer, EPS),))
     kept = plan_trajectory(request, PlannerConfig(keep_right_m=OFFSET), sdf).plan
-    plain = plan_trajectory(request, PlannerConfig(), sdf).plan
+    plain = plan_trajectory(request, PlannerConfig(keep_right_m=0.0), sdf).plan
     np.testing.assert_array_equal(kept.positions, plain.positions)
     np.testing.assert_array_equal(kept.velocities, plain.velocities)

@@ -1,6 +1,7 @@
 """Turning room: a car-like plan keeps the room to turn away from a peer ahead
 (agent.turn_room): the geometry, its Jacobians, and what it asks of a plan."""
 
+import dataclasses
 import math
 
 import gtsam
@@ -77,9 +78,10 @@ def _least_room(plan: Plan, peer: np.ndarray, radius: float) -> float:
 
 
 def test_a_car_like_plan_to_a_goal_short_of_a_standing_peer_keeps_its_turning_room():
-    """A goal 0.55 m short of a car that stands ahead, roughly head on: without the rows (the
-    default) the plan drives at it and its states keep well under eps of turning room; with
-    them each keeps more, and nearly eps (the rows are soft), in every draw."""
+    """A goal 0.55 m short of a car that stands ahead, roughly head on: without the rows
+    (and without keeping right, which also steers past it) the plan drives at it and its
+    states keep well under eps of turning room; with them each keeps more, and nearly eps
+    (the rows are soft), in every draw."""
     sdf = build_sdf(WorldConfig(bounds_m=(-3.0, -3.0, 3.0, 3.0)))
     min_turn_radius = 0.3
     for seed in range(12):
@@ -92,8 +94,10 @@ def test_a_car_like_plan_to_a_goal_short_of_a_standing_peer_keeps_its_turning_ro
                               t_arrive=8.0, epsilon_obstacle=0.25, lane=((-1.0, 0.0),), peers=(standing,),
                               steering=(0.0, min_turn_radius))
         radius = planned_turn_radius(request, PlannerConfig())
-        kept = _least_room(plan_trajectory(request, PlannerConfig(turn_room=True), sdf).plan, peer, radius)
-        unkept = _least_room(plan_trajectory(request, PlannerConfig(), sdf).plan, peer, radius)
+        alone = PlannerConfig(keep_right_m=0.0)  # the rows alone, without keeping right
+        kept = _least_room(plan_trajectory(request, dataclasses.replace(alone, turn_room=True), sdf).plan, peer,
+                           radius)
+        unkept = _least_room(plan_trajectory(request, alone, sdf).plan, peer, radius)
         assert kept > unkept + 0.02, (seed, kept, unkept)
         assert kept > EPS - 0.07, (seed, kept)
 
