@@ -11,9 +11,9 @@ With u the unit vector from us to the peer and n = (-u_y, u_x) its left normal, 
 is placed at q' = q + offset n, where it is ahead (u . h > 0, h our direction of travel)
 and we close on it ((v_q - v_p) . u < -MOVING_MPS). Since n is normal to the line of sight,
 |p - q'|^2 = |p - q|^2 + offset^2: such a peer's epsilon becomes sqrt(eps^2 + offset^2), so
-the hinge still keeps eps from where the peer really is. Verification is unchanged (it
-checks the real plans). Pure numpy, evaluated once per replan on the previous plan.
-docs/design/planner.md, "Car-like cars" (keeping right).
+the hinge keeps eps from where the peer really is, to the extent that the plan stays where
+the line of sight was judged (the previous plan). Verification checks the real plans.
+Pure numpy, once per replan. docs/design/planner.md, "Car-like cars" (keeping right).
 """
 
 from __future__ import annotations
