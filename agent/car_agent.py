@@ -89,8 +89,9 @@ class CarAgent:
         self._optimised_against: dict[int, PeerConstraint] = {}
         """What the current plan was optimised against, by peer (for kept plans)."""
         self._optimised_arrival = math.nan
-        self._passing_until = -math.inf
-        """Until when lane keeping is off: we are passing a peer head on (agent.safe_plan, ``pass``)."""
+        self._lane_off_until = -math.inf
+        """Until when lane keeping is off: we pass a peer head on (agent.safe_plan, ``pass``), or
+        a car-like car stalled (its lane's pull holds it short of a way round a parked car)."""
         self.deadlock = DeadlockWatch(self.car.id, self.scenario.deadlock)
         self.replan_ms: deque = deque(maxlen=100_000)  # bounded: a lab run may last hours
         self.counters: Counter = Counter()
@@ -253,19 +254,22 @@ class CarAgent:
             self.at_goal = False  # parked across a peer's only way: the detour below, then back
         t0 = max(now, self.depart_at)
         position, velocity, on_plan = self._start_state(motion, t0, now)
-        remaining = self._remaining_length(motion.position, t0, held_to(self.scenario.vehicle, motion.yaw))
+        steering = held_to(self.scenario.vehicle, motion.yaw)
+        remaining = remaining_length(self.plan, self.car, motion.position, t0, steering)
         # A car that yielded is behind schedule: its arrival slips so that it goes on at
         # its cruise speed instead of racing to catch up (a car-like car's by the turn it
         # has to make first, too).
         self.t_arrive = max(self.t_arrive, t0 + remaining / self.cruise + 0.5 * ARRIVAL_SLACK_S)
         t_arrive = self.t_arrive
         constraints = self.peer_constraints(now)
+        if steering is not None and now >= self.depart_at and self.deadlock.stalled(self.car.id, now):
+            self._lane_off_until = now + PASS_HOLD_S  # stalled: the lane gives way (a car-like car's arcs)
         request = PlanRequest(
             t_now=t0, position=position, velocity=velocity, goal=goal, t_arrive=t_arrive,
             epsilon_obstacle=self.scenario.safety.epsilon_obstacle(self.car.radius_m),
             peers=tuple(c for _, c in constraints), warm_start=self.plan, route=self.car.route,
-            lane=(self.car.start, *self.car.route) if now >= self._passing_until else (),
-            steering=held_to(self.scenario.vehicle, motion.yaw),
+            lane=(self.car.start, *self.car.route) if now >= self._lane_off_until else (),
+            steering=steering,
         )
         detour = self._give_way(now, motion.position, request.steering)
         if detour is not None:  # giving way in a deadlock (agent.deadlock): to the detour instead
@@ -296,7 +300,7 @@ class CarAgent:
         self._optimised_against = {peer: c for peer, c in constraints}
         self._optimised_arrival = self.t_arrive
         if outcome.tried and outcome.tried[-1] == "pass":  # hold the pass: no lane to pull us back in front of the peer
-            self._passing_until = now + PASS_HOLD_S
+            self._lane_off_until = now + PASS_HOLD_S
             self.counters["head_on_passes"] += 1  # a retry (plans_retry) that passes a peer met head on
         return outcome.result
 
@@ -399,19 +403,6 @@ class CarAgent:
         self.counters["replan_from_measured"] += 1
         return motion.position, motion.velocity, False
 
-    def _remaining_length(self, position: np.ndarray, t0: float,
-                          steering: tuple[float, float] | None = None) -> float:
-        """Along the plan (one that stops short leaves the rest straight to the goal), or
-        the route; a car-like car's (``steering``) turn first (agent.steering.turn_then)."""
-        if self.plan is None:
-            points = np.array([position, *self.car.route, self.car.goal])
-        else:
-            times = np.linspace(t0, max(self.plan.t_end, t0), 30)
-            points = np.vstack([position, self.plan.position_at(times), self.car.goal])
-        if steering is not None:
-            points = turn_then(points, *steering)
-        return float(np.sum(np.linalg.norm(np.diff(points, axis=0), axis=1)))
-
     # --- outputs ----------------------------------------------------------------------------
 
     def carry_over(self, before: "CarAgent") -> None:
@@ -457,3 +448,18 @@ class CarAgent:
 
     def trust_in(self, peer: int, now: float) -> float:
         return self.trust.trust(peer, now)
+
+
+def remaining_length(plan: Plan | None, car: CarConfig, position: np.ndarray, t0: float,
+                     steering: tuple[float, float] | None = None) -> float:
+    """How far ``car`` still drives from ``position``: along ``plan`` from t0 (one that
+    stops short leaves the rest straight to the goal), or with no plan along the route; a
+    car-like car's (``steering``) turn first (agent.steering.turn_then)."""
+    if plan is None:
+        points = np.array([position, *car.route, car.goal])
+    else:
+        times = np.linspace(t0, max(plan.t_end, t0), 30)
+        points = np.vstack([position, plan.position_at(times), car.goal])
+    if steering is not None:
+        points = turn_then(points, *steering)
+    return float(np.sum(np.linalg.norm(np.diff(points, axis=0), axis=1)))

@@ -1,0 +1,67 @@
+"""A car-like car that stalls plans without lane keeping for a while: the lane's pull
+must not hold it short of the arc round a parked car; a car that turns in place, or one
+that gets somewhere, keeps its lane."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from trustfg.agent import car_agent
+from trustfg.agent.car_agent import PASS_HOLD_S, CarAgent
+
+FRAME_S = 0.05
+
+
+def agent_of(intersection, intersection_sdf, steering: str) -> CarAgent:
+    vehicle = dataclasses.replace(intersection.vehicle, steering=steering)
+    alone = dataclasses.replace(intersection, cars=intersection.cars[:1], vehicle=vehicle)
+    agent = CarAgent(alone.cars[0], alone, intersection_sdf)
+    agent.set_departure(0.0, 0.3)
+    return agent
+
+
+def lanes_while(agent: CarAgent, monkeypatch, t_to: float, follows: bool) -> list[tuple[float, bool]]:
+    """Replan every period until ``t_to``; the car follows its plan (``follows``) or stands
+    where it started. Returns (time, planned with a lane) of every replan."""
+    seen: list[tuple[float, bool]] = []
+    real = car_agent.plan_safely
+
+    def spy(request, *args, **kwargs):
+        seen.append((request.t_now, bool(request.lane)))
+        return real(request, *args, **kwargs)
+
+    monkeypatch.setattr(car_agent, "plan_safely", spy)
+    start = np.array(agent.car.start, dtype=float)
+    heading = float(np.arctan2(*(np.array(agent.car.goal) - start)[::-1]))
+    period, next_replan = agent.scenario.control.replan_period_s, 0.0
+    for t in np.arange(0.0, t_to, FRAME_S):
+        here = np.ravel(agent.plan.position_at(t)) if follows and agent.plan is not None else start
+        agent.observe(t, agent.car.id, float(here[0]), float(here[1]), heading)
+        if t + 1e-9 >= next_replan:
+            next_replan += period
+            agent.replan(t)
+    return seen
+
+
+@pytest.mark.parametrize("seconds", [6.0, 8.0])
+def test_a_car_like_car_that_stalls_plans_off_its_lane(intersection, intersection_sdf, monkeypatch, seconds):
+    agent = agent_of(intersection, intersection_sdf, "car")
+    window = intersection.deadlock.window_s
+    seen = lanes_while(agent, monkeypatch, seconds, follows=False)
+    assert all(lane for t, lane in seen if t < window - 0.3)  # before a whole window: on its lane
+    late = [lane for t, lane in seen if t > window + 0.5]
+    assert late and not any(late)  # stalled all along: off its lane, held PASS_HOLD_S at a time
+    assert PASS_HOLD_S > intersection.control.replan_period_s
+
+
+def test_a_car_like_car_that_drives_keeps_its_lane(intersection, intersection_sdf, monkeypatch):
+    agent = agent_of(intersection, intersection_sdf, "car")
+    seen = lanes_while(agent, monkeypatch, 6.0, follows=True)
+    assert len(seen) > 20 and all(lane for _, lane in seen)
+
+
+def test_a_car_that_turns_in_place_keeps_its_lane_when_it_stalls(intersection, intersection_sdf, monkeypatch):
+    agent = agent_of(intersection, intersection_sdf, "in-place")
+    seen = lanes_while(agent, monkeypatch, 6.0, follows=False)
+    assert len(seen) > 20 and all(lane for _, lane in seen)
