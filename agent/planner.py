@@ -300,8 +300,8 @@ def _kept_right(request: PlanRequest, config: PlannerConfig, check_times: np.nda
     heading = np.array([math.cos(request.heading), math.sin(request.heading)])
     directions = np.where(speed >= MOVING_MPS, velocities / np.maximum(speed, 1e-9), heading)
     peer_velocities = np.stack([peer.plan.state_at(times)[1].reshape(shape) for peer, _ in near], axis=2)
-    return keep_right(positions.reshape(shape), directions.reshape(shape), peer_positions, peer_velocities,
-                      epsilons, config.keep_right_m)
+    return keep_right(positions.reshape(shape), directions.reshape(shape), velocities.reshape(shape),
+                      peer_positions, peer_velocities, epsilons, config.keep_right_m)
 
 
 def route_segments(request: PlanRequest) -> np.ndarray:

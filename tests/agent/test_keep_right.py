@@ -1,4 +1,4 @@
-"""Keeping right: car-like plans pass a peer that comes at them on their left side."""
+"""Keeping right: car-like plans that close on a peer pass it on their left side."""
 
 import dataclasses
 import math
@@ -16,42 +16,40 @@ EPS = 0.45
 OFFSET = 0.1
 
 
-def _one(own, direction, peer, peer_velocity, offset=OFFSET):
+def _one(own, direction, own_velocity, peer, peer_velocity, offset=OFFSET):
     """keep_right at one check time against one peer."""
     shape = (1, 1, 2)
     positions, epsilons = keep_right(np.reshape(own, shape), np.reshape(direction, shape),
-                                     np.reshape(peer, (1, 1, 1, 2)), np.reshape(peer_velocity, (1, 1, 1, 2)),
-                                     np.array([EPS]), offset)
+                                     np.reshape(own_velocity, shape), np.reshape(peer, (1, 1, 1, 2)),
+                                     np.reshape(peer_velocity, (1, 1, 1, 2)), np.array([EPS]), offset)
     return positions[0, 0, 0], epsilons[0]
 
 
-def test_a_peer_coming_at_us_ahead_is_seen_to_the_left_and_kept_as_far_away():
-    q, eps = _one([0.0, 0.0], [1.0, 0.0], [1.0, 0.0], [-0.3, 0.0])
+def test_a_peer_we_close_on_ahead_is_seen_to_the_left_and_kept_as_far_away():
+    q, eps = _one([0.0, 0.0], [1.0, 0.0], [0.3, 0.0], [1.0, 0.0], [-0.3, 0.0])
     np.testing.assert_allclose(q, [1.0, OFFSET])
     assert eps == pytest.approx(math.sqrt(EPS ** 2 + OFFSET ** 2))
     rng = np.random.default_rng(0)
     for _ in range(50):  # shifted normal to the line of sight: the distance grows as stated
         own, peer = rng.uniform(-2, 2, 2), rng.uniform(-2, 2, 2)
         direction = (peer - own) / np.linalg.norm(peer - own)
-        q, _ = _one(own, direction, peer, -0.2 * direction)
+        q, _ = _one(own, direction, 0.3 * direction, peer, -0.2 * direction)
         assert np.linalg.norm(q - own) ** 2 == pytest.approx(np.linalg.norm(peer - own) ** 2 + OFFSET ** 2)
 
 
-@pytest.mark.parametrize("peer, peer_velocity", [
-    ([-1.0, 0.0], [0.5, 0.0]),   # behind us, catching up
-    ([1.0, 0.0], [0.4, 0.0]),    # ahead, drawing away
-    ([1.0, 0.0], [0.1, 0.0]),    # ahead, slower: we close on it, it does not come at us
-    ([1.0, 0.0], [0.01, 0.0]),   # ahead, standing: it will not turn right for us
-    ([1.0, 0.0], [0.0, 0.3]),    # ahead, crossing our way
+@pytest.mark.parametrize("own_velocity, peer, peer_velocity", [
+    ([0.3, 0.0], [-1.0, 0.0], [0.5, 0.0]),   # behind us, catching up
+    ([0.3, 0.0], [1.0, 0.0], [0.4, 0.0]),    # ahead, drawing away
+    ([0.0, 0.0], [1.0, 0.0], [0.01, 0.0]),   # neither of us moves
 ])
-def test_peers_that_do_not_come_at_us_ahead_are_seen_where_they_are(peer, peer_velocity):
-    q, eps = _one([0.0, 0.0], [1.0, 0.0], peer, peer_velocity)
+def test_peers_behind_or_not_closing_are_seen_where_they_are(own_velocity, peer, peer_velocity):
+    q, eps = _one([0.0, 0.0], [1.0, 0.0], own_velocity, peer, peer_velocity)
     np.testing.assert_allclose(q, peer)
     assert eps == EPS
 
 
 def test_off_it_changes_nothing():
-    q, eps = _one([0.0, 0.0], [1.0, 0.0], [1.0, 0.0], [-0.3, 0.0], offset=0.0)
+    q, eps = _one([0.0, 0.0], [1.0, 0.0], [0.3, 0.0], [1.0, 0.0], [-0.3, 0.0], offset=0.0)
     np.testing.assert_allclose(q, [1.0, 0.0])
     assert eps == EPS
 
