@@ -1,6 +1,6 @@
-"""A car-like car that stalls plans without lane keeping for a while: the lane's pull
-must not hold it short of the arc round a parked car; a car that turns in place, or one
-that gets somewhere, keeps its lane."""
+"""A car-like car stalled alone plans without lane keeping for a while: the lane's pull
+must not hold it short of the arc round a parked car; a car that turns in place, one
+that gets somewhere, or one with a car near that is out, keeps its lane."""
 
 import dataclasses
 
@@ -21,9 +21,11 @@ def agent_of(intersection, intersection_sdf, steering: str) -> CarAgent:
     return agent
 
 
-def lanes_while(agent: CarAgent, monkeypatch, t_to: float, follows: bool) -> list[tuple[float, bool]]:
+def lanes_while(agent: CarAgent, monkeypatch, t_to: float, follows: bool,
+                peer_at: tuple[float, float] | None = None) -> list[tuple[float, bool]]:
     """Replan every period until ``t_to``; the car follows its plan (``follows``) or stands
-    where it started. Returns (time, planned with a lane) of every replan."""
+    where it started; ``peer_at``: where a peer stands, seen (its goal never heard). Returns
+    (time, planned with a lane) of every replan."""
     seen: list[tuple[float, bool]] = []
     real = car_agent.plan_safely
 
@@ -38,6 +40,8 @@ def lanes_while(agent: CarAgent, monkeypatch, t_to: float, follows: bool) -> lis
     for t in np.arange(0.0, t_to, FRAME_S):
         here = np.ravel(agent.plan.position_at(t)) if follows and agent.plan is not None else start
         agent.observe(t, agent.car.id, float(here[0]), float(here[1]), heading)
+        if peer_at is not None:
+            agent.observe(t, agent.car.id + 1, *peer_at, 0.0)
         if t + 1e-9 >= next_replan:
             next_replan += period
             agent.replan(t)
@@ -45,7 +49,7 @@ def lanes_while(agent: CarAgent, monkeypatch, t_to: float, follows: bool) -> lis
 
 
 @pytest.mark.parametrize("seconds", [6.0, 8.0])
-def test_a_car_like_car_that_stalls_plans_off_its_lane(intersection, intersection_sdf, monkeypatch, seconds):
+def test_a_car_like_car_stalled_alone_plans_off_its_lane(intersection, intersection_sdf, monkeypatch, seconds):
     agent = agent_of(intersection, intersection_sdf, "car")
     window = intersection.deadlock.window_s
     seen = lanes_while(agent, monkeypatch, seconds, follows=False)
@@ -53,6 +57,17 @@ def test_a_car_like_car_that_stalls_plans_off_its_lane(intersection, intersectio
     late = [lane for t, lane in seen if t > window + 0.5]
     assert late and not any(late)  # stalled all along: off its lane, held PASS_HOLD_S at a time
     assert PASS_HOLD_S > intersection.control.replan_period_s
+
+
+def test_a_car_like_car_stalled_beside_a_car_that_is_out_keeps_its_lane(intersection, intersection_sdf,
+                                                                      monkeypatch):
+    """Standing with a car near that is not parked, a car may be waiting for it, or in a
+    deadlock with it (agent.deadlock resolves that): it keeps to its lane."""
+    agent = agent_of(intersection, intersection_sdf, "car")
+    start = np.array(agent.car.start, dtype=float)
+    beside = start + 0.6 * np.array([0.0, 1.0])
+    seen = lanes_while(agent, monkeypatch, 6.0, follows=False, peer_at=(float(beside[0]), float(beside[1])))
+    assert len(seen) > 20 and all(lane for _, lane in seen)
 
 
 def test_a_car_like_car_that_drives_keeps_its_lane(intersection, intersection_sdf, monkeypatch):
