@@ -215,14 +215,15 @@ class DeadlockWatch:
             return []
         return sorted(near)
 
-    def stalled_alone(self, now: float, peers: dict[int, PeerSeen]) -> bool:
-        """We are stalled with no car within group_radius_m that is out and about (parked,
-        waiting and stuck cars aside): nobody holds us but the walls and the parked cars."""
+    def nothing_to_wait_for(self, now: float, peers: dict[int, PeerSeen]) -> bool:
+        """We are stalled, and so is every car within group_radius_m that is out and about
+        (parked, waiting and stuck cars aside): no car near us is getting somewhere."""
         if not self.stalled(self.car_id, now):
             return False
         here = self.history[-1][1][self.car_id][0]
-        return not any(np.linalg.norm(p.position - here) <= self.config.group_radius_m for p in peers.values()
-                       if not (p.at_goal or p.waiting or p.stuck))
+        return all(self.stalled(cid, now) for cid, p in peers.items()
+                   if not (p.at_goal or p.waiting or p.stuck)
+                   and np.linalg.norm(p.position - here) <= self.config.group_radius_m)
 
     def stalled(self, car_id: int, now: float) -> bool:
         """Came less than progress_m nearer its goal over a whole window (moved less than

@@ -1,6 +1,7 @@
-"""A car-like car stalled alone plans without lane keeping for a while: the lane's pull
-must not hold it short of the arc round a parked car; a car that turns in place, one
-that gets somewhere, or one with a car near that is out, keeps its lane."""
+"""A car-like car stalled with nothing to wait for plans without lane keeping for a
+while: the lane's pull must not hold it short of the arc round a parked car, or keep it
+in a knot of cars; a car that turns in place, one that gets somewhere, or one that waits
+for a car near it that gets somewhere, keeps its lane."""
 
 import dataclasses
 
@@ -22,9 +23,9 @@ def agent_of(intersection, intersection_sdf, steering: str) -> CarAgent:
 
 
 def lanes_while(agent: CarAgent, monkeypatch, t_to: float, follows: bool,
-                peer_at: tuple[float, float] | None = None) -> list[tuple[float, bool]]:
+                peer_at=None) -> list[tuple[float, bool]]:
     """Replan every period until ``t_to``; the car follows its plan (``follows``) or stands
-    where it started; ``peer_at``: where a peer stands, seen (its goal never heard). Returns
+    where it started; ``peer_at(t)``: where a peer is, seen (its goal never heard). Returns
     (time, planned with a lane) of every replan."""
     seen: list[tuple[float, bool]] = []
     real = car_agent.plan_safely
@@ -41,7 +42,7 @@ def lanes_while(agent: CarAgent, monkeypatch, t_to: float, follows: bool,
         here = np.ravel(agent.plan.position_at(t)) if follows and agent.plan is not None else start
         agent.observe(t, agent.car.id, float(here[0]), float(here[1]), heading)
         if peer_at is not None:
-            agent.observe(t, agent.car.id + 1, *peer_at, 0.0)
+            agent.observe(t, agent.car.id + 1, *peer_at(t), 0.0)
         if t + 1e-9 >= next_replan:
             next_replan += period
             agent.replan(t)
@@ -59,15 +60,18 @@ def test_a_car_like_car_stalled_alone_plans_off_its_lane(intersection, intersect
     assert PASS_HOLD_S > intersection.control.replan_period_s
 
 
-def test_a_car_like_car_stalled_beside_a_car_that_is_out_keeps_its_lane(intersection, intersection_sdf,
-                                                                      monkeypatch):
-    """Standing with a car near that is not parked, a car may be waiting for it, or in a
-    deadlock with it (agent.deadlock resolves that): it keeps to its lane."""
+@pytest.mark.parametrize("speed, keeps_lane", [(0.0, False), (0.1, True)])
+def test_a_car_like_car_stalled_beside_a_car_keeps_its_lane_while_that_car_gets_somewhere(
+        intersection, intersection_sdf, monkeypatch, speed, keeps_lane):
+    """Beside a car that moves on, a car that stands waits for it on its lane; beside one
+    that stands too (a deadlock: we go first, the lower id), nothing moves, and the lane
+    gives way."""
     agent = agent_of(intersection, intersection_sdf, "car")
-    start = np.array(agent.car.start, dtype=float)
-    beside = start + 0.6 * np.array([0.0, 1.0])
-    seen = lanes_while(agent, monkeypatch, 6.0, follows=False, peer_at=(float(beside[0]), float(beside[1])))
-    assert len(seen) > 20 and all(lane for _, lane in seen)
+    beside = np.array(agent.car.start, dtype=float) + np.array([0.0, 0.6])
+    seen = lanes_while(agent, monkeypatch, 6.0, follows=False,
+                       peer_at=lambda t: (float(beside[0] + speed * t), float(beside[1])))
+    late = [lane for t, lane in seen if t > intersection.deadlock.window_s + 0.5]
+    assert late and all(late) == keeps_lane and any(late) == keeps_lane
 
 
 def test_a_car_like_car_that_drives_keeps_its_lane(intersection, intersection_sdf, monkeypatch):

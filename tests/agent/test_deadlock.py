@@ -125,24 +125,24 @@ def test_a_stuck_peer_makes_no_group_and_nobody_gives_way_to_it(room):
     assert two.deadlocks == 0 and two.yields == 0 and all(d is None for d in detours)
 
 
-@pytest.mark.parametrize("peer, alone", [
-    (dict(), False),                  # a car that stands nose to nose with us: we may wait for it
-    (dict(peer_moves=0.1), False),    # a car that gets somewhere near us: we wait for it
+@pytest.mark.parametrize("peer, expected", [
+    (dict(), True),                   # a car nose to nose with us that stands too: a deadlock
+    (dict(peer_moves=0.1), False),    # a car near us that gets somewhere: we wait for it
     (dict(peer_at_goal=True), True),  # parked: nobody to wait for
     (dict(peer_stuck=True), True),    # stuck: a wall
 ])
-def test_stalled_alone_is_a_stall_with_no_car_out_and_about_near_us(room, peer, alone):
+def test_nothing_to_wait_for_is_a_stall_where_no_car_near_gets_somewhere(room, peer, expected):
     config = dataclasses.replace(CONFIG, enabled=False)  # no detour: we stand all along
     early, two = DeadlockWatch(2, config), DeadlockWatch(2, config)
     watch_for(2, early, config.window_s - 0.5, room, **peer)
-    assert not early.stalled_alone(config.window_s - 0.6, {})  # not a whole window yet
+    assert not early.nothing_to_wait_for(config.window_s - 0.6, {})  # not a whole window yet
     seconds = config.window_s + 1.0
     watch_for(2, two, seconds, room, **peer)
     moved = peer.get("peer_moves", 0.0) * (seconds - STEP_S)
     last = dataclasses.replace(seen(ONE, moved), at_goal=peer.get("peer_at_goal", False),
                                stuck=peer.get("peer_stuck", False))
-    assert two.stalled_alone(seconds - STEP_S, {1: last}) == alone
-    assert two.stalled_alone(seconds - STEP_S, {})  # nobody near at all
+    assert two.nothing_to_wait_for(seconds - STEP_S, {1: last}) == expected
+    assert two.nothing_to_wait_for(seconds - STEP_S, {})  # nobody near at all
 
 
 def test_the_detour_ends_after_yield_s_and_needs_a_fresh_window(room):
