@@ -91,7 +91,7 @@ class CarAgent:
         self._optimised_arrival = math.nan
         self._lane_off_until = -math.inf
         """Until when lane keeping is off: we pass a peer head on (agent.safe_plan, ``pass``), or
-        a car-like car stalled with nothing to wait for (its lane's pull holds it short of an arc)."""
+        a stalled car-like car (DeadlockConfig.leave_lane; off by default)."""
         self.deadlock = DeadlockWatch(self.car.id, self.scenario.deadlock)
         self.replan_ms: deque = deque(maxlen=100_000)  # bounded: a lab run may last hours
         self.counters: Counter = Counter()
@@ -354,8 +354,8 @@ class CarAgent:
         blockers = frozenset(self.last_outcome.blocked_by) if self.last_outcome else frozenset()
         detour = self.deadlock.goal(now, position, np.asarray(self.car.goal, float), seen, now >= self.depart_at,
                                     safety.epsilon_0(r, r), self.sdf, safety.epsilon_obstacle(r), blockers, steering)
-        if steering is not None and now >= self.depart_at and self.deadlock.nothing_to_wait_for(now, seen):
-            self._lane_off_until = now + PASS_HOLD_S  # stalled, no car near moves: the lane gives way
+        if steering is not None and now >= self.depart_at and self.deadlock.leaves_lane(now, seen):
+            self._lane_off_until = now + PASS_HOLD_S  # stalled (deadlock.leave_lane): the lane gives way
         for name, count in (("deadlocks", self.deadlock.deadlocks), ("deadlock_yields", self.deadlock.yields)):
             if count:
                 self.counters[name] = count

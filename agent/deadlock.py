@@ -215,15 +215,17 @@ class DeadlockWatch:
             return []
         return sorted(near)
 
-    def nothing_to_wait_for(self, now: float, peers: dict[int, PeerSeen]) -> bool:
-        """We are stalled, and so is every car within group_radius_m that is out and about
-        (parked, waiting and stuck cars aside): no car near us is getting somewhere."""
-        if not self.stalled(self.car_id, now):
+    def leaves_lane(self, now: float, peers: dict[int, PeerSeen]) -> bool:
+        """Whether we, stalled, plan without our lane (DeadlockConfig.leave_lane): "alone",
+        no car within group_radius_m is out and about (parked, waiting and stuck cars
+        aside); "nothing-to-wait-for", every such car is stalled too."""
+        rule = self.config.leave_lane
+        if rule == "never" or not self.stalled(self.car_id, now):
             return False
         here = self.history[-1][1][self.car_id][0]
-        return all(self.stalled(cid, now) for cid, p in peers.items()
-                   if not (p.at_goal or p.waiting or p.stuck)
-                   and np.linalg.norm(p.position - here) <= self.config.group_radius_m)
+        near = [cid for cid, p in peers.items() if not (p.at_goal or p.waiting or p.stuck)
+                and np.linalg.norm(p.position - here) <= self.config.group_radius_m]
+        return not near if rule == "alone" else all(self.stalled(cid, now) for cid in near)
 
     def stalled(self, car_id: int, now: float) -> bool:
         """Came less than progress_m nearer its goal over a whole window (moved less than

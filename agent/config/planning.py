@@ -7,6 +7,8 @@ from dataclasses import dataclass
 
 from .checks import ConfigError, positive
 
+LEAVE_LANE = ("never", "alone", "nothing-to-wait-for")
+"""When a stalled car-like car leaves its lane (DeadlockConfig.leave_lane)."""
 TRACK_HISTORY_S = 2.0
 """How long a car keeps its observations of every car (agent.sightings.Track.history_s)."""
 
@@ -393,7 +395,16 @@ class DeadlockConfig:
     """How long a car that gives way keeps its detour before it heads for its goal again."""
     detour_m: float = 0.6
     """How far the detour goal lies from where the car gave way."""
+    leave_lane: str = "never"
+    """Car-like cars: when a stalled car plans without lane keeping, 3 s at a time:
+    "never"; "alone" (no car within group_radius_m is out and about -- parked, waiting and
+    stuck cars aside); "nothing-to-wait-for" (no such car is getting somewhere). Off by
+    default: measured on the car-like bank, "nothing-to-wait-for" loses as many runs as
+    it gains (docs/design/planner.md, "Leaving the lane when stalled")."""
 
     def validate(self, path: str) -> None:
         for name in ("window_s", "progress_m", "group_radius_m", "yield_s", "detour_m"):
             positive(getattr(self, name), f"{path}.{name}")
+        if self.leave_lane not in LEAVE_LANE:
+            raise ConfigError(f"{path}.leave_lane: expected one of {', '.join(map(repr, LEAVE_LANE))}, "
+                              f"got {self.leave_lane!r}")

@@ -1,7 +1,6 @@
-"""A car-like car stalled with nothing to wait for plans without lane keeping for a
-while: the lane's pull must not hold it short of the arc round a parked car, or keep it
-in a knot of cars; a car that turns in place, one that gets somewhere, or one that waits
-for a car near it that gets somewhere, keeps its lane."""
+"""deadlock.leave_lane: a stalled car-like car plans without lane keeping for a while, as
+the rule says; by default, and for a car that turns in place, one that gets somewhere, or
+one that waits for a car near it that gets somewhere, it keeps its lane."""
 
 import dataclasses
 
@@ -14,9 +13,10 @@ from trustfg.agent.car_agent import PASS_HOLD_S, CarAgent
 FRAME_S = 0.05
 
 
-def agent_of(intersection, intersection_sdf, steering: str) -> CarAgent:
+def agent_of(intersection, intersection_sdf, steering: str, rule: str = "nothing-to-wait-for") -> CarAgent:
     vehicle = dataclasses.replace(intersection.vehicle, steering=steering)
-    alone = dataclasses.replace(intersection, cars=intersection.cars[:1], vehicle=vehicle)
+    deadlock = dataclasses.replace(intersection.deadlock, leave_lane=rule)
+    alone = dataclasses.replace(intersection, cars=intersection.cars[:1], vehicle=vehicle, deadlock=deadlock)
     agent = CarAgent(alone.cars[0], alone, intersection_sdf)
     agent.set_departure(0.0, 0.3)
     return agent
@@ -49,9 +49,10 @@ def lanes_while(agent: CarAgent, monkeypatch, t_to: float, follows: bool,
     return seen
 
 
-@pytest.mark.parametrize("seconds", [6.0, 8.0])
-def test_a_car_like_car_stalled_alone_plans_off_its_lane(intersection, intersection_sdf, monkeypatch, seconds):
-    agent = agent_of(intersection, intersection_sdf, "car")
+@pytest.mark.parametrize("rule, seconds", [("alone", 6.0), ("nothing-to-wait-for", 8.0)])
+def test_a_car_like_car_stalled_alone_plans_off_its_lane(intersection, intersection_sdf, monkeypatch, rule,
+                                                         seconds):
+    agent = agent_of(intersection, intersection_sdf, "car", rule)
     window = intersection.deadlock.window_s
     seen = lanes_while(agent, monkeypatch, seconds, follows=False)
     assert all(lane for t, lane in seen if t < window - 0.3)  # before a whole window: on its lane
@@ -72,6 +73,13 @@ def test_a_car_like_car_stalled_beside_a_car_keeps_its_lane_while_that_car_gets_
                        peer_at=lambda t: (float(beside[0] + speed * t), float(beside[1])))
     late = [lane for t, lane in seen if t > intersection.deadlock.window_s + 0.5]
     assert late and all(late) == keeps_lane and any(late) == keeps_lane
+
+
+def test_by_default_a_stalled_car_like_car_keeps_its_lane(intersection, intersection_sdf, monkeypatch):
+    assert intersection.deadlock.leave_lane == "never"
+    agent = agent_of(intersection, intersection_sdf, "car", "never")
+    seen = lanes_while(agent, monkeypatch, 6.0, follows=False)
+    assert len(seen) > 20 and all(lane for _, lane in seen)
 
 
 def test_a_car_like_car_that_drives_keeps_its_lane(intersection, intersection_sdf, monkeypatch):

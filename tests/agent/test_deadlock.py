@@ -6,7 +6,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from trustfg.agent.config import DeadlockConfig, Obstacle, TrustConfig, WorldConfig
+from trustfg.agent.config import ConfigError, DeadlockConfig, Obstacle, TrustConfig, WorldConfig
 from trustfg.agent.deadlock import LANE_STEP_M, DeadlockWatch, PeerSeen, goes_first, lane, peers_seen
 from trustfg.agent.evidence import PeerView
 from trustfg.agent.gp import standing
@@ -125,24 +125,32 @@ def test_a_stuck_peer_makes_no_group_and_nobody_gives_way_to_it(room):
     assert two.deadlocks == 0 and two.yields == 0 and all(d is None for d in detours)
 
 
-@pytest.mark.parametrize("peer, expected", [
-    (dict(), True),                   # a car nose to nose with us that stands too: a deadlock
-    (dict(peer_moves=0.1), False),    # a car near us that gets somewhere: we wait for it
-    (dict(peer_at_goal=True), True),  # parked: nobody to wait for
-    (dict(peer_stuck=True), True),    # stuck: a wall
+@pytest.mark.parametrize("peer, alone, nothing_to_wait_for", [
+    (dict(), False, True),                 # a car nose to nose with us that stands too: a deadlock
+    (dict(peer_moves=0.1), False, False),  # a car near us that gets somewhere: we wait for it
+    (dict(peer_at_goal=True), True, True),  # parked: nobody to wait for
+    (dict(peer_stuck=True), True, True),    # stuck: a wall
 ])
-def test_nothing_to_wait_for_is_a_stall_where_no_car_near_gets_somewhere(room, peer, expected):
-    config = dataclasses.replace(CONFIG, enabled=False)  # no detour: we stand all along
-    early, two = DeadlockWatch(2, config), DeadlockWatch(2, config)
-    watch_for(2, early, config.window_s - 0.5, room, **peer)
-    assert not early.nothing_to_wait_for(config.window_s - 0.6, {})  # not a whole window yet
-    seconds = config.window_s + 1.0
-    watch_for(2, two, seconds, room, **peer)
-    moved = peer.get("peer_moves", 0.0) * (seconds - STEP_S)
-    last = dataclasses.replace(seen(ONE, moved), at_goal=peer.get("peer_at_goal", False),
-                               stuck=peer.get("peer_stuck", False))
-    assert two.nothing_to_wait_for(seconds - STEP_S, {1: last}) == expected
-    assert two.nothing_to_wait_for(seconds - STEP_S, {})  # nobody near at all
+def test_a_stalled_car_leaves_its_lane_as_the_rule_says(room, peer, alone, nothing_to_wait_for):
+    expected = {"never": False, "alone": alone, "nothing-to-wait-for": nothing_to_wait_for}
+    for rule, leaves in expected.items():
+        config = dataclasses.replace(CONFIG, enabled=False, leave_lane=rule)  # no detour: we stand
+        early, two = DeadlockWatch(2, config), DeadlockWatch(2, config)
+        watch_for(2, early, config.window_s - 0.5, room, **peer)
+        assert not early.leaves_lane(config.window_s - 0.6, {})  # not a whole window yet
+        seconds = config.window_s + 1.0
+        watch_for(2, two, seconds, room, **peer)
+        moved = peer.get("peer_moves", 0.0) * (seconds - STEP_S)
+        last = dataclasses.replace(seen(ONE, moved), at_goal=peer.get("peer_at_goal", False),
+                                   stuck=peer.get("peer_stuck", False))
+        assert two.leaves_lane(seconds - STEP_S, {1: last}) == leaves, rule
+        assert two.leaves_lane(seconds - STEP_S, {}) == (rule != "never")  # nobody near at all
+
+
+def test_the_lane_rule_is_off_by_default_and_must_be_known():
+    assert DeadlockConfig().leave_lane == "never"
+    with pytest.raises(ConfigError, match="leave_lane"):
+        DeadlockConfig(leave_lane="sometimes").validate("deadlock")
 
 
 def test_the_detour_ends_after_yield_s_and_needs_a_fresh_window(room):
