@@ -347,8 +347,9 @@ class CarAgent:
 
     def _give_way(self, now: float, position: np.ndarray, steering: tuple[float, float] | None) -> np.ndarray | None:
         """The deadlock watch (agent.deadlock) on what we see: a detour goal while we give
-        way, else None (``steering``: a car-like car's, agent.steering.held_to). Counts
-        ``deadlocks`` and ``deadlock_yields``."""
+        way, else None (``steering``: a car-like car's, agent.steering.held_to); a stalled
+        car-like car's lane off for PASS_HOLD_S when DeadlockConfig.leave_lane says so.
+        Counts ``deadlocks`` and ``deadlock_yields``."""
         seen = peers_seen(self.tracks, self.peers, self.car.id, now, self.scenario.arrival_radius_m)
         safety, r = self.scenario.safety, self.car.radius_m
         blockers = frozenset(self.last_outcome.blocked_by) if self.last_outcome else frozenset()

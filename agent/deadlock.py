@@ -208,9 +208,7 @@ class DeadlockWatch:
         we are waiting for it, not deadlocked (else empty)."""
         if not self.stalled(self.car_id, now):
             return []
-        here = self.history[-1][1][self.car_id][0]
-        near = [cid for cid, p in peers.items() if not (p.at_goal or p.waiting or p.stuck)
-                and (cid in blockers or np.linalg.norm(p.position - here) <= self.config.group_radius_m)]
+        near = self._out_near(peers, blockers)
         if not all(self.stalled(cid, now) for cid in near):
             return []
         return sorted(near)
@@ -222,10 +220,15 @@ class DeadlockWatch:
         rule = self.config.leave_lane
         if rule == "never" or not self.stalled(self.car_id, now):
             return False
-        here = self.history[-1][1][self.car_id][0]
-        near = [cid for cid, p in peers.items() if not (p.at_goal or p.waiting or p.stuck)
-                and np.linalg.norm(p.position - here) <= self.config.group_radius_m]
+        near = self._out_near(peers)
         return not near if rule == "alone" else all(self.stalled(cid, now) for cid in near)
+
+    def _out_near(self, peers: dict[int, PeerSeen], blockers: frozenset[int] = frozenset()) -> list[int]:
+        """The peers out and about (not at their goals, waiting or stuck) within
+        group_radius_m of where we were last recorded, or among ``blockers``."""
+        here = self.history[-1][1][self.car_id][0]
+        return [cid for cid, p in peers.items() if not (p.at_goal or p.waiting or p.stuck)
+                and (cid in blockers or np.linalg.norm(p.position - here) <= self.config.group_radius_m)]
 
     def stalled(self, car_id: int, now: float) -> bool:
         """Came less than progress_m nearer its goal over a whole window (moved less than
