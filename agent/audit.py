@@ -182,6 +182,9 @@ class Ledger:
         due = []  # (claim, start, end): the checks that came due, read against the track at once
         claims = list(self.claims)
         for i, claim in enumerate(claims):
+            start = end = claim.next
+            if end >= len(claim.times) or claim.times[end] > (now_reach if end == 0 else late_reach):
+                continue  # nothing of it has come due (most claims, most ticks)
             heard = i + 1 < len(claims)
             successor = min(claims[i + 1].stamp if heard else np.inf, claim.lost_successor)
             superseded = successor + c.audit_notice_s
@@ -191,7 +194,6 @@ class Ledger:
             undecided = (claim.stamp + self.replan_period_s + c.audit_notice_s
                          if not heard and successor == np.inf
                          and track.last_stamp - claim.received < c.audit_horizon_s else np.inf)
-            start = end = claim.next
             done = False
             while end < len(claim.times) and claim.times[end] <= (now_reach if end == 0 else late_reach):
                 if end > 0 and claim.times[end] > superseded:  # a newer plan gave notice of any change

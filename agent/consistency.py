@@ -36,17 +36,16 @@ GUARD_SLACK_MPS = 0.05
 its plan's speed (our view of the poses is not exactly its own)."""
 
 
-def guard_holds(scenario: Scenario, sdf: SignedDistanceField, radius, peer: int, motion, motions: dict,
-                announced: np.ndarray) -> bool:
+def guard_holds(scenario: Scenario, sdf: SignedDistanceField, peer: int, poses: dict, announced: np.ndarray) -> bool:
     """Would the proximity guard (agent.guard), fed the poses we see, hold ``peer``
     below the speed of the plan it announced (``announced``: that plan's velocity
     now)? Then it is slower than it said for safety's sake -- every honest car's guard
-    does that, unannounced. ``radius``: a car's radius by its id."""
+    does that, unannounced. ``poses``: (x, y, yaw, radius) of every car seen, by id."""
     if not scenario.guard.enabled:
         return False
-    others = [(*m.position, m.yaw, radius(cid)) for cid, m in motions.items() if cid != peer]
-    return capped_below(*motion.position, motion.yaw, radius(peer), others, scenario.guard,
-                        scenario.safety, sdf, float(np.linalg.norm(announced)) - GUARD_SLACK_MPS)
+    others = [pose for cid, pose in poses.items() if cid != peer]
+    return capped_below(*poses[peer], others, scenario.guard, scenario.safety, sdf,
+                        float(np.linalg.norm(announced)) - GUARD_SLACK_MPS)
 
 
 def turns_first(scenario: Scenario, motion, announced: np.ndarray) -> bool:
@@ -86,15 +85,15 @@ def acceleration_mismatch(view: PeerView, fresh_s: float, until: float) -> tuple
     ANNOUNCED_MIN_S ago) announced what the peer did from its stamp on, the smaller
     mismatch counts -- a car that had to brake for a surprise and said so at its next
     replan is consistent; one that says it brakes and does not is not."""
-    end = next(((t, v) for t, v in reversed(view.velocities) if t <= until + 1e-9), None)
-    if end is None:
+    velocities = view.velocities  # sorted by t (appended as seen): bisection finds the latest that qualifies
+    end = bisect.bisect_right(velocities, until + 1e-9, key=operator.itemgetter(0)) - 1
+    if end < 0:
         return None
-    t, observed = end
-    start = next(((t_old, v_old) for t_old, v_old in reversed(view.velocities)
-                  if t - t_old >= CONSISTENCY_WINDOW_S - 1e-6), None)
-    if start is None or t - start[0] > 2.0 * CONSISTENCY_WINDOW_S:
+    t, observed = velocities[end]
+    start = bisect.bisect_left(velocities, True, key=lambda tv: t - tv[0] < CONSISTENCY_WINDOW_S - 1e-6) - 1
+    if start < 0 or t - velocities[start][0] > 2.0 * CONSISTENCY_WINDOW_S:
         return None  # none yet, or the peer was out of sight over the window: no evidence from not seeing
-    t_old, observed_old = start
+    t_old, observed_old = velocities[start]
     announced = max(((stamp, p) for stamp, p in view.history if stamp <= t_old), key=lambda sp: sp[0],
                     default=None)
     if announced is None or t_old - announced[0] > fresh_s:

@@ -58,27 +58,29 @@ class Witness:
         motions = {cid: m for cid, m in motions.items() if m is not None and now - m.stamp <= FRESH_MOTION_S}
         for peer, view in peers.items():
             audit(view, tracks.get(peer), recorder(trust, peer, now), counters)
+        radii = {cid: self.radius(cid) for cid in motions}
+        poses = {cid: (*m.position, m.yaw, radii[cid]) for cid, m in motions.items()}  # as the guard reads them
+        breach = self.scenario.safety.breach_distance
         for peer, motion in motions.items():
             if peer == self.own_id:
                 continue
-            others = [(m, self.scenario.safety.breach_distance(self.radius(peer), self.radius(cid)))
-                      for cid, m in motions.items() if cid != peer]
+            others = [(m, breach(radii[peer], radii[cid])) for cid, m in motions.items() if cid != peer]
             if others:
                 # Does the peer keep the required clearance from every car it closes on?
                 trust.record(peer, SAFETY, *safety_verdict(motion, others, config), now)
             view = peers.get(peer)
             if view is not None:
-                self._judge_consistency(now, peer, view, motion, motions, trust, counters)
+                self._judge_consistency(now, peer, view, motion, poses, trust, counters)
 
-    def _judge_consistency(self, now: float, peer: int, view: PeerView, motion, motions: dict, trust: TrustBook,
+    def _judge_consistency(self, now: float, peer: int, view: PeerView, motion, poses: dict, trust: TrustBook,
                            counters: Counter) -> None:
         """Note what the peer did now, and judge the window that has just become due."""
         config = self.scenario.trust
         view.velocities.append((motion.stamp, motion.velocity))
         if view.accepted is not None:
             announced = view.accepted.state_at(np.array([motion.stamp]))[1][0]
-            if turns_first(self.scenario, motion, announced) or guard_holds(
-                    self.scenario, self.sdf, self.radius, peer, motion, motions, announced):
+            if (turns_first(self.scenario, motion, announced)
+                    or guard_holds(self.scenario, self.sdf, peer, poses, announced)):
                 view.held.append(motion.stamp)
         mismatch = acceleration_mismatch(view, self.scenario.control.replan_period_s + REPLAN_MARGIN_S,
                                          now - config.stale_after_s)
