@@ -8,6 +8,7 @@ from hypothesis import strategies as st
 
 from trustfg.agent import messages
 from trustfg.agent.gp import Plan
+from trustfg.agent.message_fields import numbers
 from trustfg.agent.messages import (
     Inbox,
     MessageError,
@@ -225,3 +226,23 @@ def test_an_identical_copy_is_judged_without_decoding_it_again(monkeypatch):
     assert inbox.dropped == {"replayed": 1, "out_of_order": 1}
     assert inbox.accept(first, key_sender=3) is None and inbox.dropped["spoofed_sender"] == 1  # another key: decoded
     assert len(decoded) == 3
+
+
+@pytest.mark.parametrize("values, bounds, expected", [
+    ([0.5, -2.0], (-1e6, 1e6), [0.5, -2.0]),
+    ([1, 2.5], (-1e6, 1e6), [1.0, 2.5]),  # integers are numbers too
+    ([1e308, 1e308], (0.0, 1.7e308), [1e308, 1e308]),  # in range, though their sum is not finite
+    ([float("nan"), 1.0], (-1e6, 1e6), "not finite"),
+    ([1.0, float("inf")], (-1e6, 1e6), "not finite"),
+    ([float("-inf"), float("inf")], (-1e6, 1e6), "not finite"),
+    ([0.5, 2e6], (-1e6, 1e6), "outside"),
+    ([True, 1.0], (-1e6, 1e6), "expected numbers"),
+    (["1.0"], (-1e6, 1e6), "expected numbers"),
+])
+def test_an_array_of_numbers_is_read_whole_or_refused(values, bounds, expected):
+    if isinstance(expected, str):
+        with pytest.raises(MessageError, match=expected):
+            numbers({"a": values}, "a", 1, 4, *bounds)
+    else:
+        out = numbers({"a": values}, "a", 1, 4, *bounds)
+        assert out == expected and all(type(x) is float for x in out)
