@@ -399,8 +399,8 @@ class DeadlockConfig:
     """Car-like cars: when a stalled car plans without lane keeping, 3 s at a time:
     "never"; "alone" (no car within group_radius_m is out and about -- parked, waiting and
     stuck cars aside); "nothing-to-wait-for" (no such car is getting somewhere). Off by
-    default: measured on the car-like bank, "nothing-to-wait-for" loses as many runs as
-    it gains (docs/design/planner.md, "Leaving the lane when stalled")."""
+    default: measured on the car-like bank, either rule loses about as many runs as it
+    gains (docs/design/planner.md, "Leaving the lane when stalled")."""
 
     def validate(self, path: str) -> None:
         for name in ("window_s", "progress_m", "group_radius_m", "yield_s", "detour_m"):
