@@ -231,11 +231,12 @@ def interval_problem(request: PlanRequest, config: PlannerConfig, sdf: SignedDis
         peer_positions = np.zeros((n - 1, len(fractions), 0, 2))
         epsilons = np.zeros(0)
     targets = None
-    if config.consistency and peers:
-        # abar_i: the peers' mean acceleration magnitude over interval i (all peers: this
-        # is the fleet's manner of driving, near or far).
+    driving = driving_peers(peers, check_times) if config.consistency else []
+    if driving:
+        # abar_i: the driving peers' mean acceleration magnitude over interval i (near or
+        # far: this is the fleet's manner of driving).
         accel = np.stack([np.linalg.norm(p.plan.acceleration_at(check_times.ravel()), axis=1)
-                          .reshape(check_times.shape) for p in peers])  # (M, I, K)
+                          .reshape(check_times.shape) for p in driving])  # (M, I, K)
         targets = accel.mean(axis=(0, 2))
     return factors.IntervalProblem(
         dt=dt,
@@ -248,6 +249,16 @@ def interval_problem(request: PlanRequest, config: PlannerConfig, sdf: SignedDis
         consistency_targets=targets,
         lane=route_segments(request) if config.lane_keeping else np.zeros((0, 2, 2)),
     )
+
+
+def driving_peers(peers: tuple[PeerConstraint, ...], check_times: np.ndarray) -> list[PeerConstraint]:
+    """The peers whose plans move (MOVING_MPS) at some check time: the collaborators whose
+    accelerations set the consistency target. A car parked at its goal or waiting to
+    depart has no manner of driving; counted in, it would pull abar towards 0, and a car
+    at rest among parked cars would be held there (every acceleration a cost)."""
+    times = check_times.ravel()
+    speeds = [np.linalg.norm(peer.plan.state_at(times)[1], axis=1) for peer in peers]
+    return [peer for peer, speed in zip(peers, speeds) if float(np.max(speed)) >= MOVING_MPS]
 
 
 def peers_within_reach(peers: tuple[PeerConstraint, ...], position: np.ndarray, check_times: np.ndarray,
