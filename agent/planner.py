@@ -231,12 +231,11 @@ def interval_problem(request: PlanRequest, config: PlannerConfig, sdf: SignedDis
         peer_positions = np.zeros((n - 1, len(fractions), 0, 2))
         epsilons = np.zeros(0)
     targets = None
-    driving = driving_peers(peers, check_times) if config.consistency else []
-    if driving:
-        # abar_i: the driving peers' mean acceleration magnitude over interval i (near or
-        # far: this is the fleet's manner of driving).
+    if config.consistency and any_peer_drives(peers, check_times):
+        # abar_i: the peers' mean acceleration magnitude over interval i (all peers: this
+        # is the fleet's manner of driving, near or far).
         accel = np.stack([np.linalg.norm(p.plan.acceleration_at(check_times.ravel()), axis=1)
-                          .reshape(check_times.shape) for p in driving])  # (M, I, K)
+                          .reshape(check_times.shape) for p in peers])  # (M, I, K)
         targets = accel.mean(axis=(0, 2))
     return factors.IntervalProblem(
         dt=dt,
@@ -251,14 +250,13 @@ def interval_problem(request: PlanRequest, config: PlannerConfig, sdf: SignedDis
     )
 
 
-def driving_peers(peers: tuple[PeerConstraint, ...], check_times: np.ndarray) -> list[PeerConstraint]:
-    """The peers whose plans move (MOVING_MPS) at some check time: the collaborators whose
-    accelerations set the consistency target. A car parked at its goal or waiting to
-    depart has no manner of driving; counted in, it would pull abar towards 0, and a car
-    at rest among parked cars would be held there (every acceleration a cost)."""
+def any_peer_drives(peers: tuple[PeerConstraint, ...], check_times: np.ndarray) -> bool:
+    """Whether some peer's plan moves (MOVING_MPS) at a check time. When none does, the
+    fleet has no manner of driving to be consistent with: abar would be 0, every
+    acceleration a cost, and a car at rest among parked cars would wait to set off at
+    every replan."""
     times = check_times.ravel()
-    speeds = [np.linalg.norm(peer.plan.state_at(times)[1], axis=1) for peer in peers]
-    return [peer for peer, speed in zip(peers, speeds) if float(np.max(speed)) >= MOVING_MPS]
+    return any(float(np.max(np.linalg.norm(peer.plan.state_at(times)[1], axis=1))) >= MOVING_MPS for peer in peers)
 
 
 def peers_within_reach(peers: tuple[PeerConstraint, ...], position: np.ndarray, check_times: np.ndarray,

@@ -109,8 +109,8 @@ class PlannerConfig:
     """The proximity factor: plans keep epsilon from peers' shared plans (paper eqs.
     (7)-(9)). Off (experiments): peers are not planned around."""
     consistency: bool = True
-    """The consistency factor: a plan's accelerations are pulled down to those of its peers
-    that drive (paper Sec. III.D; parked and waiting cars set no pace). Off
+    """The consistency factor: a plan's accelerations are pulled down to its peers' (paper
+    Sec. III.D), while some peer drives (a fleet that stands sets no pace). Off
     (experiments): no such pull."""
     transparency: bool = True
     """The transparency factor: a peer's epsilon widens as its transparency trust falls

@@ -5,7 +5,7 @@ import pytest
 
 from trustfg.agent.config import PlannerConfig, SafetyConfig
 from trustfg.agent.gp import Plan
-from trustfg.agent.planner import (PeerConstraint, PlanningError, PlanRequest, driving_peers, peers_within_reach,
+from trustfg.agent.planner import (PeerConstraint, PlanningError, PlanRequest, any_peer_drives, peers_within_reach,
                                    plan_trajectory)
 
 EPS_OBSTACLE = SafetyConfig().epsilon_obstacle(0.1)
@@ -169,9 +169,9 @@ def test_the_planner_counts_and_ignores_peers_out_of_reach(intersection_sdf):
 
 
 def test_parked_peers_set_no_pace_for_a_car_that_sets_off(intersection_sdf):
-    """Cars parked far off (out of reach, no manner of driving) leave the plan of a car at
-    rest as it is alone: counted into the consistency target they would make every
-    acceleration a cost, and a car among parked cars would wait to set off."""
+    """Cars parked far off (out of reach; no peer drives) leave the plan of a car at rest as
+    it is alone: a consistency target of 0 would make every acceleration a cost, and a
+    car among parked cars would wait to set off."""
     start, goal = LANES[0]
     parked = tuple(standing_peer(np.array([40.0, y])) for y in (40.0, 41.0))
     alone = plan_trajectory(request(start, goal), PlannerConfig(), intersection_sdf)
@@ -179,7 +179,8 @@ def test_parked_peers_set_no_pace_for_a_car_that_sets_off(intersection_sdf):
     assert np.allclose(among.plan.positions, alone.plan.positions, atol=1e-9)
 
 
-def test_only_peers_that_move_are_driving():
+def test_a_fleet_drives_when_one_peer_moves():
     times = reach_times(4.0)
     crossing = PeerConstraint(crossing_peer(6.0), EPS_0)
-    assert driving_peers((standing_peer(np.zeros(2)), crossing), times) == [crossing]
+    assert any_peer_drives((standing_peer(np.zeros(2)), crossing), times)
+    assert not any_peer_drives((standing_peer(np.zeros(2)), standing_peer(np.ones(2))), times)
