@@ -6,9 +6,9 @@ it and every car of its group (peers near it or in its way, not parked, waiting 
 stuck) are stalled -- less than ``progress_m`` nearer their goals over ``window_s``. The
 car of the group that has been through the most deadlocks, then the lowest id, goes on;
 every other drives to a detour for ``yield_s``, clear of the lanes of the cars that go
-before it (:func:`lane`) -- of those near it, when no detour clears them all. A car
-parked at its goal that alone walls a stuck peer in (or, car-like, boxes it in:
-:func:`boxes_in`) steps aside (:meth:`DeadlockWatch.step_aside`) until the peer has a way.
+before it (:func:`lane`). A car parked at its goal that alone walls
+a stuck peer in (or, car-like, boxes it in: :func:`boxes_in`) steps aside
+(:meth:`DeadlockWatch.step_aside`) until the peer has a way.
 
 A car-like car (VehicleConfig.steering = "car") passes its heading and turning radius:
 its way to a detour is the arc that turns it there (agent.steering.departure_arc), not a
@@ -133,12 +133,6 @@ class DeadlockWatch:
             return None  # we go first (or resolution is off): keep trying for the goal
         goal = detour_goal(position, [_way(peers[cid]) for cid in first], _everyone(peers), self.config.detour_m,
                            keep_clear, sdf, wall_clear, steering)
-        near = [cid for cid in first if np.linalg.norm(peers[cid].position - position) <= self.config.group_radius_m]
-        if goal is None and 0 < len(near) < len(first):
-            # No detour keeps off every first car's lane: make way for the cars beside us,
-            # whose lanes we stand on; a far blocker (one on our goal) comes by its own way.
-            goal = detour_goal(position, [_way(peers[cid]) for cid in near], _everyone(peers),
-                               self.config.detour_m, keep_clear, sdf, wall_clear, steering)
         if goal is None:
             return None
         self.detour = Detour(goal, now + self.config.yield_s)

@@ -46,7 +46,7 @@ class IntervalProblem:
     """(M,) proximity threshold per peer, eps_ab = eps_0 * g(tau_b)."""
     max_speed: float
     consistency_targets: np.ndarray | None
-    """(I,) abar_i, or None when the consistency factor is off or no peer drives."""
+    """(I,) abar_i, or None when the consistency factor is off."""
     lane: np.ndarray
     """(S, 2, 2) segments (a, b) of the route polyline; S = 0 turns lane keeping off."""
 

@@ -231,7 +231,7 @@ def interval_problem(request: PlanRequest, config: PlannerConfig, sdf: SignedDis
         peer_positions = np.zeros((n - 1, len(fractions), 0, 2))
         epsilons = np.zeros(0)
     targets = None
-    if config.consistency and any_peer_drives(peers, check_times):
+    if config.consistency and peers:
         # abar_i: the peers' mean acceleration magnitude over interval i (all peers: this
         # is the fleet's manner of driving, near or far).
         accel = np.stack([np.linalg.norm(p.plan.acceleration_at(check_times.ravel()), axis=1)
@@ -248,15 +248,6 @@ def interval_problem(request: PlanRequest, config: PlannerConfig, sdf: SignedDis
         consistency_targets=targets,
         lane=route_segments(request) if config.lane_keeping else np.zeros((0, 2, 2)),
     )
-
-
-def any_peer_drives(peers: tuple[PeerConstraint, ...], check_times: np.ndarray) -> bool:
-    """Whether some peer's plan moves (MOVING_MPS) at a check time. When none does, the
-    fleet has no manner of driving to be consistent with: abar would be 0, every
-    acceleration a cost, and a car at rest among parked cars would wait to set off at
-    every replan."""
-    times = check_times.ravel()
-    return any(float(np.max(np.linalg.norm(peer.plan.state_at(times)[1], axis=1))) >= MOVING_MPS for peer in peers)
 
 
 def peers_within_reach(peers: tuple[PeerConstraint, ...], position: np.ndarray, check_times: np.ndarray,

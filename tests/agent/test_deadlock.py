@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from trustfg.agent.config import ConfigError, DeadlockConfig, Obstacle, TrustConfig, WorldConfig
-from trustfg.agent.deadlock import LANE_STEP_M, DeadlockWatch, PeerSeen, detour_goal, goes_first, lane, peers_seen
+from trustfg.agent.deadlock import LANE_STEP_M, DeadlockWatch, PeerSeen, goes_first, lane, peers_seen
 from trustfg.agent.evidence import PeerView
 from trustfg.agent.gp import standing
 from trustfg.agent.messages import PlanMessage
@@ -354,36 +354,6 @@ def test_a_detour_keeps_off_the_lane_of_a_car_that_stands_and_goes_first(room):
     lane = np.linspace([-2.0, 0.0], [2.0, 0.0], 401)
     assert float(np.min(np.linalg.norm(lane - detour, axis=1))) >= KEEP_CLEAR
     assert np.linalg.norm(detour - position) == pytest.approx(CONFIG.detour_m)
-
-
-def test_with_no_way_off_every_first_cars_lane_a_car_makes_way_for_the_car_beside_it(room):
-    """Car 6 stands nose to nose with car 1 (beside it, on car 1's lane); car 3 stands 2.5 m
-    south, its lane north through car 6 to a goal across the room, and our plans fail
-    against it. Every direction off car 1's lane (north or south) lies on car 3's, so no
-    detour keeps off both: car 6 makes way for car 1, the car beside it."""
-    one = PeerSeen(np.array([-0.25, 0.0]), goal=np.array([2.0, 0.0]), way=way([-0.25, 0.0], [2.0, 0.0]))
-    three = PeerSeen(np.array([0.25, -2.5]), goal=np.array([0.25, 2.5]), way=np.array([[0.25, -2.5], [0.25, 2.5]]))
-    position = np.array([0.25, 0.0])
-    everyone = [one.position, three.position, one.goal, three.goal]
-    ways = [np.vstack([p.position, p.way]) for p in (one, three)]
-    assert detour_goal(position, ways, everyone, CONFIG.detour_m, KEEP_CLEAR, room, WALL_CLEAR) is None
-    watch = DeadlockWatch(6, CONFIG)
-    detours = [watch.goal(t, position, np.array([-2.0, 0.0]), {1: one, 3: three}, True, KEEP_CLEAR, room,
-                          WALL_CLEAR, frozenset({3})) for t in np.arange(0.0, CONFIG.window_s + 1.0, STEP_S)]
-    detour = next(d for d in detours if d is not None)
-    assert float(np.min(np.linalg.norm(lane(ways[0], room) - detour, axis=1))) >= KEEP_CLEAR
-    assert np.linalg.norm(detour - position) == pytest.approx(CONFIG.detour_m)
-
-
-def test_a_car_that_cannot_make_way_for_the_car_beside_it_stands(room):
-    """As above, but car 3 is within group_radius_m too (both first cars beside us): with
-    no detour off both lanes, car 6 keeps trying for its goal."""
-    one = PeerSeen(np.array([-0.25, 0.0]), goal=np.array([2.0, 0.0]), way=way([-0.25, 0.0], [2.0, 0.0]))
-    three = PeerSeen(np.array([0.25, -0.9]), goal=np.array([0.25, 2.5]), way=np.array([[0.25, -0.9], [0.25, 2.5]]))
-    watch = DeadlockWatch(6, CONFIG)
-    detours = [watch.goal(t, np.array([0.25, 0.0]), np.array([-2.0, 0.0]), {1: one, 3: three}, True, KEEP_CLEAR,
-                          room, WALL_CLEAR) for t in np.arange(0.0, CONFIG.window_s + 1.0, STEP_S)]
-    assert watch.deadlocks == 1 and all(d is None for d in detours)
 
 
 def test_a_lane_stops_where_it_first_meets_a_wall(pocket):

@@ -5,8 +5,7 @@ import pytest
 
 from trustfg.agent.config import PlannerConfig, SafetyConfig
 from trustfg.agent.gp import Plan
-from trustfg.agent.planner import (PeerConstraint, PlanningError, PlanRequest, any_peer_drives, peers_within_reach,
-                                   plan_trajectory)
+from trustfg.agent.planner import PeerConstraint, PlanningError, PlanRequest, peers_within_reach, plan_trajectory
 
 EPS_OBSTACLE = SafetyConfig().epsilon_obstacle(0.1)
 EPS_0 = SafetyConfig().epsilon_0(0.1, 0.1)
@@ -166,21 +165,3 @@ def test_the_planner_counts_and_ignores_peers_out_of_reach(intersection_sdf):
     both = plan_trajectory(request(start, goal, peers=(far, crossing)), PlannerConfig(), intersection_sdf)
     assert both.peers_out_of_reach == 1 and alone.peers_out_of_reach == 0
     assert np.allclose(both.plan.positions, alone.plan.positions, atol=1e-9)
-
-
-def test_parked_peers_set_no_pace_for_a_car_that_sets_off(intersection_sdf):
-    """Cars parked far off (out of reach; no peer drives) leave the plan of a car at rest as
-    it is alone: a consistency target of 0 would make every acceleration a cost, and a
-    car among parked cars would wait to set off."""
-    start, goal = LANES[0]
-    parked = tuple(standing_peer(np.array([40.0, y])) for y in (40.0, 41.0))
-    alone = plan_trajectory(request(start, goal), PlannerConfig(), intersection_sdf)
-    among = plan_trajectory(request(start, goal, peers=parked), PlannerConfig(), intersection_sdf)
-    assert np.allclose(among.plan.positions, alone.plan.positions, atol=1e-9)
-
-
-def test_a_fleet_drives_when_one_peer_moves():
-    times = reach_times(4.0)
-    crossing = PeerConstraint(crossing_peer(6.0), EPS_0)
-    assert any_peer_drives((standing_peer(np.zeros(2)), crossing), times)
-    assert not any_peer_drives((standing_peer(np.zeros(2)), standing_peer(np.ones(2))), times)

@@ -50,8 +50,7 @@ def test_a_run_counts_how_each_replan_ended_and_stays_deterministic_under_faults
 def test_doorway_standoffs_are_resolved_by_giving_way():
     """Two cars set off together at the same speed for a door one car wide, replanning at
     the same instants: no plan through it verifies while the other wants it too, and both
-    stand until one gives way -- in most seeds (in the others one slips through first);
-    every standoff ends with a car giving way (with resolution off, some never arrive).
+    stand until one gives way -- in every seed (with resolution off, some never arrive).
     The scene pins the replanning instants, which seeds would otherwise draw apart. The two
     swap places, and with verify.swap_first the one that goes first sets off while the
     other waits for it to leave its goal -- no standoff; switched off here, both set off
@@ -63,8 +62,7 @@ def test_doorway_standoffs_are_resolved_by_giving_way():
         runs = [run for run, _ in pool.map(run_one, [scene] * len(seeds), seeds)]
     for run in runs:
         assert all(run["reached_goal"]) and not run["breaches"], run["seed"]
-        assert run["deadlock_yields"] >= 1 or run["deadlocks"] == 0, run["seed"]
-    assert sum(run["deadlocks"] >= 1 for run in runs) >= len(runs) - 2
+        assert run["deadlock_yields"] >= 1, run["seed"]
 
 
 @pytest.mark.slow
