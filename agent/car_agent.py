@@ -36,7 +36,7 @@ from .planner import PeerConstraint, PlanningError, PlanRequest, PlanResult
 from .safe_plan import FALLBACK, FIRST, KEPT, RETRY, Outcome, plan_safely
 from .sight import out_of_sight, unseen_epsilon
 from .sightings import Track, predicted_plan, standing_at
-from .steering import held_to, turn_then
+from .steering import MOVING_MPS, held_to, turn_then
 from .trust import TrustBook
 from .verify import Bounds, verify
 from .witness import Witness, recorder
@@ -212,7 +212,9 @@ class CarAgent:
                 if stands_at is not None:  # where it is seen, at eps_0 (docs/design/trust.md, "Seen standing")
                     self.counters["peers_seen_standing"] += 1
                     plan, epsilon = standing(stands_at, now), self.epsilon_0(peer)
-            constraints.append((peer, PeerConstraint(plan, epsilon, self._hold(peer))))
+            done = parked(view, self.tracks.get(peer), plan, now,
+                          self.scenario.arrival_radius_m + self.scenario.deadlock.detour_m)
+            constraints.append((peer, PeerConstraint(plan, epsilon, self._hold(peer), done)))
         return constraints
 
     def _hold(self, peer: int) -> float | None:
@@ -450,6 +452,20 @@ class CarAgent:
 
     def trust_in(self, peer: int, now: float) -> float:
         return self.trust.trust(peer, now)
+
+
+def parked(view: PeerView | None, track: Track | None, plan: Plan, now: float, reach: float) -> bool:
+    """Whether a peer is done driving: what is left of its plan from ``now`` stands, and it
+    is seen within ``reach`` of the goal it told us (the arrival radius plus
+    DeadlockConfig.detour_m, so a car that stepped aside from its goal for another counts
+    as parked too)."""
+    motion = track.motion() if track else None
+    if view is None or view.goal is None or motion is None:
+        return False
+    ahead = plan.velocities[plan.times() >= now - plan.dt]
+    if len(ahead) and float(np.max(np.linalg.norm(ahead, axis=1))) >= MOVING_MPS:
+        return False
+    return float(np.linalg.norm(motion.position - np.asarray(view.goal, float))) <= reach
 
 
 def remaining_length(plan: Plan | None, car: CarConfig, position: np.ndarray, t0: float,

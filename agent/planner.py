@@ -55,6 +55,9 @@ class PeerConstraint:
     hold_s: float | None = None
     """How long past the end of its plan verification holds the peer where the plan
     ends (None: for good; VerifyConfig.peer_hold_s)."""
+    parked: bool = False
+    """The peer is done driving: it stands at its goal, or beside it where it stepped
+    aside for a car (agent.car_agent.parked). A fleet of parked peers sets no pace."""
 
 
 @dataclass(frozen=True)
@@ -231,9 +234,11 @@ def interval_problem(request: PlanRequest, config: PlannerConfig, sdf: SignedDis
         peer_positions = np.zeros((n - 1, len(fractions), 0, 2))
         epsilons = np.zeros(0)
     targets = None
-    if config.consistency and peers:
+    if config.consistency and peers and not all(peer.parked for peer in peers):
         # abar_i: the peers' mean acceleration magnitude over interval i (all peers: this
-        # is the fleet's manner of driving, near or far).
+        # is the fleet's manner of driving, near or far). With every peer parked the
+        # fleet has done driving: abar would be 0, every acceleration a cost, and the last
+        # car out would wait to set off at every replan, so there is no target.
         accel = np.stack([np.linalg.norm(p.plan.acceleration_at(check_times.ravel()), axis=1)
                           .reshape(check_times.shape) for p in peers])  # (M, I, K)
         targets = accel.mean(axis=(0, 2))

@@ -243,3 +243,30 @@ def test_the_observation_nearest_a_stamp_is_found_by_bisection_as_by_a_scan():
         seen = deque(((t, i) for i, t in enumerate(stamps)), maxlen=64)
         stamp = rng.choice([rng.random(), round(rng.random() * 20) / 20, stamps[rng.randrange(n)], -1.0, 2.0])
         assert consistency._nearest(seen, stamp) == min(seen, key=lambda tv: abs(tv[0] - stamp))
+
+
+def test_a_peer_is_parked_when_it_stands_at_or_beside_its_goal(intersection, intersection_sdf):
+    """A peer whose plan stands, seen at its goal or a step aside from it (the deadlock
+    watch's detour), is done driving and sets no pace; standing short of its goal (a
+    knot) or with a plan that still moves, it is not."""
+    from trustfg.agent.gp import standing
+
+    me, goal = intersection.cars[0], np.array([0.4, 2.0])  # on the north arm
+    peer = me.id + 10
+    aside = intersection.arrival_radius_m + intersection.deadlock.detour_m
+
+    def parked(seen_at, moving: bool = False) -> bool:
+        agent = CarAgent(me, intersection, intersection_sdf)
+        for k in range(3):
+            t = 0.1 * k
+            agent.observe(t, peer, seen_at[0], seen_at[1], 0.0)
+            plan = standing(np.asarray(seen_at, float), t)
+            if moving:
+                plan = Plan(t, 1.0, plan.positions, np.tile([0.3, 0.0], (plan.n, 1)))
+            agent.receive(PlanMessage(peer, k, t, plan, tuple(goal)), t)
+        return dict(agent.peer_constraints(0.2))[peer].parked
+
+    assert parked(goal)
+    assert parked(goal - [0.0, aside - 0.05])  # stepped aside for a car
+    assert not parked(goal - [0.0, aside + 0.3])  # stands short of it
+    assert not parked(goal, moving=True)

@@ -165,3 +165,19 @@ def test_the_planner_counts_and_ignores_peers_out_of_reach(intersection_sdf):
     both = plan_trajectory(request(start, goal, peers=(far, crossing)), PlannerConfig(), intersection_sdf)
     assert both.peers_out_of_reach == 1 and alone.peers_out_of_reach == 0
     assert np.allclose(both.plan.positions, alone.plan.positions, atol=1e-9)
+
+
+def test_a_fleet_parked_at_its_goals_sets_no_pace(intersection_sdf):
+    """Peers parked at their goals (far off, out of reach) leave the plan of a car at rest
+    as it is alone: a consistency target of 0 would make every acceleration a cost, and
+    the last car out would wait to set off. Peers that stand short of their goals (a knot)
+    still set the pace of a fleet at rest."""
+    start, goal = LANES[0]
+    spots = (np.array([40.0, 40.0]), np.array([40.0, 41.0]))
+    alone = plan_trajectory(request(start, goal), PlannerConfig(), intersection_sdf)
+    parked = tuple(dataclasses.replace(standing_peer(spot), parked=True) for spot in spots)
+    among_parked = plan_trajectory(request(start, goal, peers=parked), PlannerConfig(), intersection_sdf)
+    assert np.allclose(among_parked.plan.positions, alone.plan.positions, atol=1e-9)
+    standing = tuple(standing_peer(spot) for spot in spots)
+    in_a_knot = plan_trajectory(request(start, goal, peers=standing), PlannerConfig(), intersection_sdf)
+    assert not np.allclose(in_a_knot.plan.positions, alone.plan.positions, atol=1e-3)
