@@ -110,7 +110,8 @@ class PlannerConfig:
     (7)-(9)). Off (experiments): peers are not planned around."""
     consistency: bool = True
     """The consistency factor: a plan's accelerations are pulled down to its peers' (paper
-    Sec. III.D). Off (experiments): no such pull."""
+    Sec. III.D), but for a fleet whose every peer is parked at its goal (no pace to keep).
+    Off (experiments): no such pull."""
     transparency: bool = True
     """The transparency factor: a peer's epsilon widens as its transparency trust falls
     (paper Sec. III.D). Off (experiments): every peer is kept at eps_0 times
