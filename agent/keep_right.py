@@ -13,9 +13,6 @@ and we close on it ((v_q - v_p) . u < -MOVING_MPS). Since n is normal to the lin
 |p - q'|^2 = |p - q|^2 + offset^2: such a peer's epsilon becomes sqrt(eps^2 + offset^2), so
 the hinge keeps eps from where the peer really is, to the extent that the plan stays where
 the line of sight was judged (the previous plan). Verification checks the real plans.
-The lane keeps right too (:func:`right_of_lane`): its centre line is moved ``side`` to the
-right between its ends, so cars that share a lane the opposite way pass 2 side apart, and
-lanes that all cross one point (a crowd swapping sides) cross over a wider area instead.
 Pure numpy, once per replan. docs/design/planner.md, "Car-like cars" (keeping right).
 """
 
@@ -47,30 +44,3 @@ def keep_right(own_positions: np.ndarray, own_directions: np.ndarray, own_veloci
     positions = peer_positions + offset * shifted[..., None] * left
     widened = np.where(shifted.any(axis=(0, 1)), np.sqrt(epsilons ** 2 + offset ** 2), epsilons)
     return positions, widened
-
-
-def right_of_lane(points: np.ndarray, side: float, taper: float) -> np.ndarray:
-    """The lane polyline ``points`` (P, 2), start to goal, moved ``side`` to the right.
-
-    Each segment a -> b with unit direction u moves by side * (u_y, -u_x) (its right
-    normal); the moved segments are joined end to start. The lane still begins at its
-    start and ends at its goal: the first and last segments reach their full shift
-    ``taper`` along from their ends (at most a third of the segment), so a plan leaves its
-    start and reaches its goal on a gentle S-curve."""
-    points = np.asarray(points, dtype=float)
-    if side <= 0.0 or len(points) < 2:
-        return points
-    last = len(points) - 2
-    moved = [points[0]]
-    for k in range(last + 1):
-        a, b = points[k], points[k + 1]
-        length = float(np.hypot(*(b - a)))
-        if length < 1e-9:
-            continue
-        u = (b - a) / length
-        right = side * np.array([u[1], -u[0]])
-        run_in = min(taper, length / 3.0)
-        moved.append(a + right + (run_in * u if k == 0 else 0.0))
-        moved.append(b + right - (run_in * u if k == last else 0.0))
-    moved.append(points[-1])
-    return np.array(moved)

@@ -35,7 +35,7 @@ from .config import PlannerConfig
 from .gp import Plan, interpolation_weights
 from .heading_factors import add_heading_factors, insert_headings
 from .interval_factors import add_batched_checks, add_gtsam_interp_checks
-from .keep_right import keep_right, right_of_lane
+from .keep_right import keep_right
 from .routes import path_length
 from .steering import MOVING_MPS, departure_arc, initial_headings
 from .turn_room import add_turn_room_factors
@@ -251,7 +251,7 @@ def interval_problem(request: PlanRequest, config: PlannerConfig, sdf: SignedDis
         epsilons=epsilons,
         max_speed=config.max_speed_mps,
         consistency_targets=targets,
-        lane=route_segments(request, config) if config.lane_keeping else np.zeros((0, 2, 2)),
+        lane=route_segments(request) if config.lane_keeping else np.zeros((0, 2, 2)),
     )
 
 
@@ -309,19 +309,11 @@ def _kept_right(request: PlanRequest, config: PlannerConfig, check_times: np.nda
                       peer_positions, peer_velocities, epsilons, config.keep_right_m)
 
 
-LANE_TAPER_M = 1.0
-"""How far along from its start and goal a lane moved right reaches its full shift, m: an
-S-curve of 0.3 m sideways at a 0.345 m turning radius takes 0.6 m."""
-
-
-def route_segments(request: PlanRequest, config: PlannerConfig) -> np.ndarray:
-    """The lane centre line as segments of the polyline lane[0] -> ... -> goal; a
-    car-like car's kept ``lane_side_m`` to the right (agent.keep_right)."""
+def route_segments(request: PlanRequest) -> np.ndarray:
+    """The lane centre line as segments of the polyline lane[0] -> ... -> goal."""
     points = np.array([*request.lane, request.goal], dtype=float)
     if len(points) < 2:
         return np.zeros((0, 2, 2))
-    if request.car_like and config.lane_side_m > 0:
-        points = right_of_lane(points, config.lane_side_m, LANE_TAPER_M)
     return np.stack([points[:-1], points[1:]], axis=1)
 
 

@@ -77,10 +77,6 @@ class PlannerConfig:
     """Car-like cars: a peer a plan closes on ahead is seen this far left of the line of
     sight, so that both turn right and pass instead of closing nose to nose
     (agent.keep_right), in m; 0: off. Cars that turn in place never use it."""
-    lane_side_m: float = 0.0
-    """Car-like cars: the lane's centre line is kept this far to its right between its
-    ends (right-hand traffic: cars sharing a lane the opposite way pass twice this apart;
-    agent.keep_right.right_of_lane), in m; 0: off."""
     turn_radius_margin: float = 0.15
     """Car-like cars: a plan turns on at least the vehicle's min_turn_radius_m times (1 +
     this), so that the tracker keeps steering to spare for its corrections."""
@@ -141,8 +137,6 @@ class PlannerConfig:
             raise ConfigError(f"{path}.turn_radius_margin: must be >= 0")
         if not (self.keep_right_m >= 0 and math.isfinite(self.keep_right_m)):
             raise ConfigError(f"{path}.keep_right_m: must be a finite number >= 0")
-        if not (self.lane_side_m >= 0 and math.isfinite(self.lane_side_m)):
-            raise ConfigError(f"{path}.lane_side_m: must be a finite number >= 0")
         if self.max_iterations < 1:
             raise ConfigError(f"{path}.max_iterations: must be >= 1")
         if self.interpolation not in ("batched", "gtsam"):

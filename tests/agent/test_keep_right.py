@@ -1,5 +1,4 @@
-"""Keeping right: car-like plans that close on a peer pass it on their left side, and keep
-right of their lane."""
+"""Keeping right: car-like plans that close on a peer pass it on their left side."""
 
 import dataclasses
 import math
@@ -9,7 +8,7 @@ import pytest
 
 from trustfg.agent.config import ConfigError, PlannerConfig, WorldConfig
 from trustfg.agent.gp import Plan
-from trustfg.agent.keep_right import keep_right, right_of_lane
+from trustfg.agent.keep_right import keep_right
 from trustfg.agent.planner import PeerConstraint, PlanRequest, plan_trajectory
 from trustfg.agent.world import build_sdf
 
@@ -114,46 +113,3 @@ def test_a_car_that_turns_in_place_plans_as_without_it():
     plain = plan_trajectory(request, PlannerConfig(keep_right_m=0.0), sdf).plan
     np.testing.assert_array_equal(kept.positions, plain.positions)
     np.testing.assert_array_equal(kept.velocities, plain.velocities)
-
-
-def test_the_lane_moves_right_between_its_ends():
-    points = np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 4.0]])  # east, then north
-    moved = right_of_lane(points, 0.3, 1.0)
-    np.testing.assert_allclose(moved[0], points[0])
-    np.testing.assert_allclose(moved[-1], points[-1])
-    np.testing.assert_allclose(moved[1:3], [[1.0, -0.3], [4.0, -0.3]])  # east: right is south
-    np.testing.assert_allclose(moved[3:5], [[4.3, 0.0], [4.3, 3.0]])  # north: right is east
-    short = right_of_lane(np.array([[0.0, 0.0], [0.6, 0.0]]), 0.3, 1.0)  # run-ins of a third each
-    np.testing.assert_allclose(short, [[0.0, 0.0], [0.2, -0.3], [0.4, -0.3], [0.6, 0.0]])
-    np.testing.assert_array_equal(right_of_lane(points, 0.0, 1.0), points)
-
-
-def test_the_lane_side_must_be_finite_and_not_negative():
-    for bad in (-0.1, math.nan, math.inf):
-        with pytest.raises(ConfigError, match="lane_side_m"):
-            PlannerConfig(lane_side_m=bad).validate("planner")
-
-
-def _lane_plan(steering, side):
-    sdf = build_sdf(WorldConfig(bounds_m=(-3.0, -3.0, 3.0, 3.0)))
-    request = PlanRequest(t_now=0.0, position=np.array([-2.0, 0.0]), velocity=np.zeros(2),
-                          goal=np.array([2.0, 0.0]), t_arrive=14.0, epsilon_obstacle=0.25,
-                          lane=((-2.0, 0.0),), steering=steering)
-    return plan_trajectory(request, PlannerConfig(lane_side_m=side), sdf).plan
-
-
-def test_a_car_like_plan_keeps_right_of_its_lane_and_ends_at_its_goal():
-    """Alone on a lane due east: the middle of the plan runs south of the centre line (the
-    lane's pull is soft against the motion prior: by a quarter of the side at least), and
-    the plan still ends at the goal."""
-    plan = _lane_plan((0.0, 0.3), 0.3)
-    middle = plan.positions[np.abs(plan.positions[:, 0]) < 0.5]
-    assert len(middle) and np.all(middle[:, 1] < -0.075), plan.positions
-    np.testing.assert_allclose(plan.positions[-1], [2.0, 0.0], atol=0.05)
-    centred = _lane_plan((0.0, 0.3), 0.0)
-    assert np.all(np.abs(centred.positions[:, 1]) < 0.02)
-
-
-def test_a_car_that_turns_in_place_keeps_to_the_centre_of_its_lane():
-    kept, plain = _lane_plan(None, 0.3), _lane_plan(None, 0.0)
-    np.testing.assert_array_equal(kept.positions, plain.positions)
