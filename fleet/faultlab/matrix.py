@@ -54,7 +54,6 @@ import json
 import signal
 import socket
 import sys
-import tempfile
 import threading
 import time
 from dataclasses import dataclass, field
@@ -95,6 +94,8 @@ class Setup:
     fleet: object
     mocap_args: list[str]
     control_port: int
+    out: Path
+    """The run's output folder; files a case writes for the run go here."""
     killed_at: float | None = None
     stop: threading.Event = field(default_factory=threading.Event)
     """Set to end the run early (fleet.launch.launcher.run's ``stop``), with its summary as usual."""
@@ -118,7 +119,8 @@ def _delay(setup: Setup) -> None:
             host, port = address.rsplit(":", 1)
             relay_host, relay_port = setup.lab.relay(host, int(port), 0.050, 0.020, datagrams=protocol == "udp")
             relays.append(f"{protocol}/{relay_host}:{relay_port}" + (f"?{metadata}" if metadata else ""))
-    zenoh_file = Path(tempfile.mkdtemp(prefix="trustfg-delay-")) / "no-gossip.json5"
+    setup.out.mkdir(parents=True, exist_ok=True)
+    zenoh_file = setup.out.resolve() / "no-gossip.json5"
     zenoh_file.write_text('{ scouting: { gossip: { enabled: false } } }\n')
     setup.fleet = dataclasses.replace(setup.fleet, bus=dataclasses.replace(
         setup.fleet.bus, connect=tuple(relays), zenoh_config=str(zenoh_file),
@@ -239,7 +241,7 @@ def run_case(case: Case, seed: int, out: Path) -> dict:
     ids = [c.id for c in scenario.cars]
     with netem.Lab(ids) as lab:
         fleet = loopback_fleet(scenario, None, None, 0.0, infra_ip=lab.infra_ip, car_ips=lab.car_ips())
-        setup = Setup(lab, fleet, [], free_port(socket.SOCK_DGRAM))
+        setup = Setup(lab, fleet, [], free_port(socket.SOCK_DGRAM), out)
         case.prepare(setup)
         setup.mocap_args.append(f"--control-port={setup.control_port}")
         schedule = [(t, (lambda action: lambda context: action(setup, context))(action)) for t, action in case.schedule]
