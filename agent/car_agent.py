@@ -377,11 +377,9 @@ class CarAgent:
 
     def _bounds(self, peers: list[int]) -> Bounds:
         """What our plans must keep from the walls and from each of ``peers`` (SafetyConfig)."""
-        safety, r, vehicle = self.scenario.safety, self.car.radius_m, self.scenario.vehicle
+        safety, r = self.scenario.safety, self.car.radius_m
         return Bounds.of(safety.epsilon_obstacle(r), safety.obstacle_breach(r),
-                         [safety.breach_distance(r, self.radius(p)) for p in peers], vehicle,
-                         escape_radius_m=vehicle.min_turn_radius_m * (1.0 + self.scenario.planner.turn_radius_margin),
-                         stop_margin_m=self.scenario.guard.stop_margin_m)
+                         [safety.breach_distance(r, self.radius(p)) for p in peers], self.scenario.vehicle)
 
     def _use(self, outcome: Outcome) -> None:
         """Adopt a replan's outcome and count it (``plans_first``, ``plans_retry``,

@@ -10,8 +10,8 @@ of at least R_min, and never reverses. These questions come up again and again:
 * :func:`turning_excess` -- does a path turn tighter than a car starting at a heading can
   drive (verification): along the path's arc length s its heading phi(s), the car's own
   at s = 0, must keep |phi(s_b) - phi(s_a)| <= (s_b - s_a) / R + slack for every s_a < s_b;
-* :func:`ways_on` -- which ways a car that stands can set off on at all (agent.deadlock);
-  :func:`turn_away_approach` -- how near it passes a point ahead when it turns away;
+* :func:`ways_on` -- which ways a car that stands can set off on at all (a car boxed in
+  by cars that stand: agent.deadlock);
 * :func:`initial_headings` -- the heading variables a plan's support states start from in
   the factor graph (agent.heading_factors); :func:`held_to` -- what a car's plans and
   detours are held to.
@@ -72,22 +72,6 @@ def departure_arc(position: np.ndarray, heading: float, target: np.ndarray, radi
         if abs(bearing) <= step_rad / 2 or crossed:
             break
     return np.array(points)
-
-
-def turn_away_approach(distance: float, bearing: float, radius: float) -> float:
-    """How near a car passes a point ``distance`` away at ``bearing`` (rad, from its
-    heading) when it turns away from it on a circle of ``radius``: the circle's centre
-    lies R to the far side, sqrt(d^2 + 2 d R sin|beta| + R^2) from the point, so
-
-        d_min = sqrt(d^2 + 2 d R sin|beta| + R^2) - R        (|beta| < 90 degrees)
-
-    and ``distance`` itself for a point beside or behind (driving on only opens the gap).
-    A car that cannot turn in place or reverse comes this much nearer a car ahead of it
-    before it can get away; a tighter turn comes less near."""
-    beta = abs(wrap(bearing))
-    if beta >= 0.5 * math.pi:
-        return distance
-    return math.sqrt(distance * distance + 2.0 * distance * radius * math.sin(beta) + radius * radius) - radius
 
 
 def turn_then(way: np.ndarray, heading: float, radius: float) -> np.ndarray:

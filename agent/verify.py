@@ -29,7 +29,7 @@ from .follower import follower_speeds
 from .gaps import half_steps, peer_gaps
 from .gp import Plan
 from .planner import PeerConstraint
-from .steering import turn_away_approach, turning_excess
+from .steering import turning_excess
 from .world import SignedDistanceField
 
 MAX_SAMPLES = 4000
@@ -81,18 +81,12 @@ class Bounds:
     max_accel_mps2: float
     min_turn_radius_m: float = 0.0
     """A car-like car's minimum turning radius; 0: the car turns in place (no 'turning' check)."""
-    escape_radius_m: float = 0.0
-    """A car-like car's escape turns, at the radius it plans with (0: none): see :func:`_escape`."""
-    stop_margin_m: float = 0.0
-    """The guard's stop margin: an escape turn keeps a peer's breach distance + this."""
 
     @classmethod
     def of(cls, epsilon_obstacle: float, obstacle_breach: float, breach: Sequence[float],
-           vehicle: VehicleConfig, escape_radius_m: float = 0.0, stop_margin_m: float = 0.0) -> "Bounds":
-        car_like = vehicle.car_like
+           vehicle: VehicleConfig) -> "Bounds":
         return cls(epsilon_obstacle, obstacle_breach, tuple(breach), vehicle.max_speed_mps, vehicle.max_accel_mps2,
-                   vehicle.min_turn_radius_m if car_like else 0.0, escape_radius_m if car_like else 0.0,
-                   stop_margin_m)
+                   vehicle.min_turn_radius_m if vehicle.car_like else 0.0)
 
 
 def check_times(plan: Plan, peers: Sequence[PeerConstraint], sample_m: float,
@@ -154,12 +148,7 @@ def verify(plan: Plan, peers: Sequence[PeerConstraint], bounds: Bounds, sdf: Sig
         gap = peer_gaps(p[:held], times[:held], peer.plan)  # |p - q| less half the larger step (agent.gaps)
         k = int(np.argmin(gap))
         clearance = min(clearance, float(gap[k] - breach))
-        keep = peer.epsilon - tol * (peer.epsilon - breach)
-        need = _from_start(keep, gap)
-        if gap[0] < keep and bounds.escape_radius_m > 0.0 and start_heading is not None:
-            (q,) = peer.plan.position_at(times[:1])
-            need = _escape(need, float(gap[0]), p[0], q, start_heading, tol * (peer.epsilon - breach),
-                           breach + bounds.stop_margin_m, bounds.escape_radius_m)
+        need = _from_start(peer.epsilon - tol * (peer.epsilon - breach), gap)
         if gap[k] < need:
             (q,) = peer.plan.position_at(times[k:k + 1])
             conflicts.append(Conflict("peer", float(times[k]), float(need - gap[k]), b, _xy(p[k]), _xy(q)))
@@ -195,22 +184,6 @@ def _from_start(need: float, distance: np.ndarray) -> float:
     """What a plan must keep: ``need``, or where it starts already nearer, no nearer
     than it starts (less a millimetre of rounding) -- it cannot undo the present."""
     return min(need, float(distance[0]) - START_SLACK_M)
-
-
-def _escape(need: float, start: float, position: np.ndarray, peer: np.ndarray, heading: float,
-            tolerated: float, stop_distance: float, radius: float) -> float:
-    """What a car-like car's plan must keep from a peer it starts nearer than ``need``:
-    it cannot turn in place or back away, so from a peer ahead it gets away only by
-    coming nearer first, as near as a turn away at ``radius`` passes the peer
-    (agent.steering.turn_away_approach) less the ``tolerated`` share of the margin a
-    plan may eat anyway -- never nearer than the guard's ``stop_distance`` (nor than it
-    starts, when already nearer than that)."""
-    offset = peer - position
-    bearing = math.atan2(float(offset[1]), float(offset[0])) - heading
-    arc = turn_away_approach(start, bearing, radius)
-    if arc >= start:  # beside or behind: driving on opens the gap
-        return need
-    return min(need, max(min(start, stop_distance), arc - tolerated) - START_SLACK_M)
 
 
 def _xy(point: np.ndarray) -> tuple[float, float]:
