@@ -110,16 +110,20 @@ class TrustBook:
         opinion.beta = c.prior_beta + keep * (opinion.beta - c.prior_beta)
         opinion.updated = max(opinion.updated, now)
 
-    def record(self, peer: int, dimension: int, success: float, failure: float, now: float) -> None:
-        """Add one graded piece of direct evidence about ``peer`` at time ``now``."""
+    def record(self, peer: int, dimension: int, success: float, failure: float, now: float,
+               amount: float = 1.0) -> None:
+        """Add one graded piece of direct evidence about ``peer`` at time ``now``, counted
+        ``amount`` times (the witness's pieces stand for its whole evidence period:
+        agent.witness.EVIDENCE_UNIT_S). Counts ``evidence_<dimension>`` and, for a piece
+        more failure than success, ``failures_<dimension>`` -- once per piece."""
         if peer == self.owner:
             return
         opinion = self.opinion(peer, now)
         self._decay(opinion, now)
         weight = self.config.consistency_failure_weight if dimension == CONSISTENCY else self.config.failure_weight
         self._fused.clear()
-        opinion.alpha[dimension] += success
-        opinion.beta[dimension] += weight * failure
+        opinion.alpha[dimension] += amount * success
+        opinion.beta[dimension] += amount * (weight * failure)
         self.counters[f"evidence_{DIMENSIONS[dimension]}"] += 1
         if failure > 0.5:
             self.counters[f"failures_{DIMENSIONS[dimension]}"] += 1

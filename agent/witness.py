@@ -24,6 +24,11 @@ from .world import SignedDistanceField
 
 FRESH_MOTION_S = 0.2
 """Only cars seen within this long count for safety and consistency evidence."""
+EVIDENCE_UNIT_S = 0.1
+"""A piece of safety or consistency evidence stands for this long of observation: a car
+that gathers every ``evidence_period_s`` counts each piece evidence_period_s / this times,
+so trust grows and forgets at the same pace however often it looks (docs/design/trust.md,
+"Evidence"). The audit's checks come on the plans' own schedule and count once each."""
 
 
 def recorder(trust: TrustBook, peer: int, now: float) -> Callable[[str, float, float], None]:
@@ -61,20 +66,22 @@ class Witness:
         radii = {cid: self.radius(cid) for cid in motions}
         poses = {cid: (*m.position, m.yaw, radii[cid]) for cid, m in motions.items()}  # as the guard reads them
         breach = self.scenario.safety.breach_distance
+        amount = config.evidence_period_s / EVIDENCE_UNIT_S
         for peer, motion in motions.items():
             if peer == self.own_id:
                 continue
             others = [(m, breach(radii[peer], radii[cid])) for cid, m in motions.items() if cid != peer]
             if others:
                 # Does the peer keep the required clearance from every car it closes on?
-                trust.record(peer, SAFETY, *safety_verdict(motion, others, config), now)
+                trust.record(peer, SAFETY, *safety_verdict(motion, others, config), now, amount)
             view = peers.get(peer)
             if view is not None:
-                self._judge_consistency(now, peer, view, motion, poses, trust, counters)
+                self._judge_consistency(now, peer, view, motion, poses, trust, counters, amount)
 
     def _judge_consistency(self, now: float, peer: int, view: PeerView, motion, poses: dict, trust: TrustBook,
-                           counters: Counter) -> None:
-        """Note what the peer did now, and judge the window that has just become due."""
+                           counters: Counter, amount: float) -> None:
+        """Note what the peer did now, and judge the window that has just become due
+        (counted ``amount`` times: :data:`EVIDENCE_UNIT_S`)."""
         config = self.scenario.trust
         view.velocities.append((motion.stamp, motion.velocity))
         if view.accepted is not None:
@@ -89,4 +96,4 @@ class Witness:
             if f > 0 and notice_lost(view, *mismatch[1:]):
                 counters["consistency_excused_by_loss"] += 1
             else:
-                trust.record(peer, CONSISTENCY, s, f, now)
+                trust.record(peer, CONSISTENCY, s, f, now, amount)

@@ -171,7 +171,8 @@ class TrustConfig:
     """Observed vs planned acceleration mismatch that still counts as consistent."""
     evidence_period_s: float = 0.1
     """How often a car turns what it observes of its peers into safety and consistency
-    evidence."""
+    evidence. A pass counts for its whole period (agent.witness.EVIDENCE_UNIT_S): trust
+    grows and forgets at the same pace at any period, and a longer one costs less CPU."""
     stale_after_s: float = 1.0
     """A peer with no plan for this long is predicted from its observed motion and
     kept at the widest epsilon; silence is never counted as lying."""
