@@ -158,6 +158,23 @@ def test_a_car_its_guard_slows_unannounced_is_not_inconsistent(intersection, int
     assert for_the_guard <= 0.25
 
 
+@pytest.mark.parametrize("seed", SEEDS[:4])
+@pytest.mark.parametrize("period_s", [0.2, 0.3])
+def test_consistency_is_judged_alike_when_a_car_looks_less_often(intersection, intersection_sdf, seed, period_s):
+    """The tests above with evidence every ``period_s`` instead of 0.1 s (a pass counts for
+    its period, agent.witness): the car that says it cruises and weaves is still caught,
+    the change of mind announced at once and the guard's unannounced braking still are
+    not held against the peer."""
+    scenario = replace(intersection, trust=replace(intersection.trust, evidence_period_s=period_s))
+    state = braking_at(3.0)
+    changes_its_mind = lambda s: plan_of(cruising if s < 3.0 else state, s)  # noqa: E731
+    announced_cruise = lambda s: plan_of(cruising, s)  # noqa: E731
+    ahead = (state(3.0)[0] + 0.45, 0.5)
+    assert consistency_failures(scenario, intersection_sdf, seed, weaving, announced_cruise, on_time) >= 4.0
+    assert consistency_failures(scenario, intersection_sdf, seed, state, changes_its_mind, on_time) <= 0.25
+    assert consistency_failures(scenario, intersection_sdf, seed, state, announced_cruise, on_time, ahead) <= 0.25
+
+
 def setting_off(s: float) -> Plan:
     """A plan made at s by a car standing at x = 0: off along +x at once, to 0.5 m/s."""
     times = s + 0.25 * np.arange(13)
