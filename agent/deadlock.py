@@ -118,7 +118,7 @@ class DeadlockWatch:
                 self.been_through += 1  # we gave way, and drove our detour
             self.detour = None
             self.history.clear()  # a fresh window before the next detection
-        self._record(now, position, goal, peers)
+        self._record(now, position, goal, peers, waiting=not departed)
         group = self.group(now, peers, blockers) if departed else []
         if not group:
             if self.deadlocked:
@@ -196,9 +196,12 @@ class DeadlockWatch:
                 or not connected(sdf, peer.position, peer.goal, wall_clear, [*walls, (tuple(detour.home), keep_clear)]))
 
 
-    def _record(self, now: float, position: np.ndarray, goal: np.ndarray, peers: dict[int, PeerSeen]) -> None:
-        self.history.append((now, {self.car_id: (np.asarray(position, float), np.asarray(goal, float), False)}
-                             | {cid: (p.position, p.goal, p.halting) for cid, p in peers.items()}))
+    def _record(self, now: float, position: np.ndarray, goal: np.ndarray, peers: dict[int, PeerSeen],
+                waiting: bool = False) -> None:
+        """One sample of the window: where we (``waiting``: not departed yet) and every peer
+        are, with their goals, whether their plans halt and whether they wait to depart."""
+        self.history.append((now, {self.car_id: (np.asarray(position, float), np.asarray(goal, float), False, waiting)}
+                             | {cid: (p.position, p.goal, p.halting, p.waiting) for cid, p in peers.items()}))
         while self.history and self.history[0][0] < now - self.config.window_s - 1e-9:
             self.history.popleft()
 
@@ -232,24 +235,25 @@ class DeadlockWatch:
 
     def stalled(self, car_id: int, now: float) -> bool:
         """Came less than progress_m nearer its goal over a whole window (moved less than
-        that, for a car whose goal we do not know), seen at every sample of it."""
+        that, for a car whose goal we do not know), seen at every sample of it and driving
+        at every one: a car that waited to depart in the window stood by its schedule."""
         if not self._window_full(now):
             return False
         track = [seen.get(car_id) for _, seen in self.history]
-        if any(entry is None for entry in track):
+        if any(entry is None or entry[3] for entry in track):
             return False
-        (first, goal, _), (latest, latest_goal, _) = track[0], track[-1]
+        (first, goal, _, _), (latest, latest_goal, _, _) = track[0], track[-1]
         if goal is not None and latest_goal is not None and np.array_equal(goal, latest_goal):
             progress = float(np.linalg.norm(first - goal) - np.linalg.norm(latest - goal))
             return progress < self.config.progress_m
-        return max(float(np.linalg.norm(p - latest)) for p, _, _ in track) < self.config.progress_m
+        return max(float(np.linalg.norm(p - latest)) for p, *_ in track) < self.config.progress_m
 
     def stuck(self, car_id: int, now: float) -> bool:
         """Stalled, or halting (its plans ending short of its goal) at every sample of a
         whole window."""
         if self.stalled(car_id, now):
             return True
-        return self._window_full(now) and all(seen.get(car_id, (None, None, False))[2] for _, seen in self.history)
+        return self._window_full(now) and all(seen.get(car_id, (None, None, False, False))[2] for _, seen in self.history)
 
     def _window_full(self, now: float) -> bool:
         """Whether the history spans a whole window (give or take a replan)."""

@@ -105,6 +105,24 @@ def test_no_deadlock_is_seen_before_a_whole_window_of_no_progress(room):
     assert two.deadlocks == 0
 
 
+@pytest.mark.parametrize("waits", ["we", "peer"])
+def test_standing_to_wait_for_a_departure_is_no_stall(room, waits):
+    """The standoff, with one car waiting to depart for the first 2 s: just after it sets
+    off its window holds more waiting than driving, and nobody may take that for a
+    deadlock; a whole window after the departure the standoff is one as before."""
+    two = DeadlockWatch(2, CONFIG)
+    depart_s = 2.0
+    detours, first_deadlock = [], None
+    for t in np.arange(0.0, depart_s + CONFIG.window_s + 1.0, STEP_S):
+        peer = dataclasses.replace(seen(ONE), waiting=waits == "peer" and t < depart_s)
+        departed = waits != "we" or t >= depart_s
+        detours.append(two.goal(t, TWO["position"], TWO["goal"], {1: peer}, departed, KEEP_CLEAR, room, WALL_CLEAR))
+        if two.deadlocks and first_deadlock is None:
+            first_deadlock = t
+    assert first_deadlock is not None and first_deadlock >= depart_s + CONFIG.window_s - 0.25 - 1e-9
+    assert any(d is not None for d in detours)  # then car 2 gives way, as in any standoff
+
+
 def test_waiting_for_a_car_that_gets_somewhere_is_no_deadlock(room):
     two = DeadlockWatch(2, CONFIG)
     watch_for(2, two, CONFIG.window_s + 1.0, room, peer_moves=0.2)  # car 1 moves on at 0.2 m/s
