@@ -118,7 +118,7 @@ class DeadlockWatch:
                 self.been_through += 1  # we gave way, and drove our detour
             self.detour = None
             self.history.clear()  # a fresh window before the next detection
-        self._record(now, position, goal, peers, waiting=not departed)
+        self._record(now, position, goal, peers, steering, waiting=not departed)
         group = self.group(now, peers, blockers) if departed else []
         if not group:
             if self.deadlocked:
@@ -148,7 +148,7 @@ class DeadlockWatch:
         ``steering`` as for :meth:`goal`."""
         if self.detour is not None and self.detour.for_peer is not None and now < self.detour.until:
             return self.detour.goal
-        self._record(now, position, goal, peers)
+        self._record(now, position, goal, peers, steering)
         if not self.config.enabled:
             return None
         position = np.asarray(position, float)
@@ -197,11 +197,17 @@ class DeadlockWatch:
 
 
     def _record(self, now: float, position: np.ndarray, goal: np.ndarray, peers: dict[int, PeerSeen],
-                waiting: bool = False) -> None:
+                steering: tuple[float, float] | None, waiting: bool = False) -> None:
         """One sample of the window: where we (``waiting``: not departed yet) and every peer
-        are, with their goals, whether their plans halt and whether they wait to depart."""
-        self.history.append((now, {self.car_id: (np.asarray(position, float), np.asarray(goal, float), False, waiting)}
-                             | {cid: (p.position, p.goal, p.halting, p.waiting) for cid, p in peers.items()}))
+        are, with their goals, whether their plans halt and, in a car-like fleet
+        (``steering`` given), whether they wait to depart: a car-like car that gives way just
+        after setting off can drive into a neighbour still waiting and have no way on. A
+        fleet that turns in place keeps the window its bank was measured with
+        (docs/design/safety.md, "Deadlocks")."""
+        car_like = steering is not None
+        self.history.append((now, {self.car_id: (np.asarray(position, float), np.asarray(goal, float), False,
+                                                 car_like and waiting)}
+                             | {cid: (p.position, p.goal, p.halting, car_like and p.waiting) for cid, p in peers.items()}))
         while self.history and self.history[0][0] < now - self.config.window_s - 1e-9:
             self.history.popleft()
 
@@ -235,8 +241,9 @@ class DeadlockWatch:
 
     def stalled(self, car_id: int, now: float) -> bool:
         """Came less than progress_m nearer its goal over a whole window (moved less than
-        that, for a car whose goal we do not know), seen at every sample of it and driving
-        at every one: a car that waited to depart in the window stood by its schedule."""
+        that, for a car whose goal we do not know), seen at every sample of it and, in a
+        car-like fleet, driving at every one: one that waited to depart in the window stood
+        by its schedule."""
         if not self._window_full(now):
             return False
         track = [seen.get(car_id) for _, seen in self.history]

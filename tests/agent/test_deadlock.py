@@ -106,21 +106,27 @@ def test_no_deadlock_is_seen_before_a_whole_window_of_no_progress(room):
 
 
 @pytest.mark.parametrize("waits", ["we", "peer"])
-def test_standing_to_wait_for_a_departure_is_no_stall(room, waits):
+@pytest.mark.parametrize("car_like", [True, False])
+def test_in_a_car_like_fleet_standing_to_wait_for_a_departure_is_no_stall(room, waits, car_like):
     """The standoff, with one car waiting to depart for the first 2 s: just after it sets
-    off its window holds more waiting than driving, and nobody may take that for a
-    deadlock; a whole window after the departure the standoff is one as before."""
+    off its window holds more waiting than driving. A car-like fleet does not take that
+    for a deadlock -- a whole window after the departure the standoff is one as before --
+    and a fleet that turns in place keeps its window as it was (a deadlock a window after
+    the start)."""
     two = DeadlockWatch(2, CONFIG)
     depart_s = 2.0
+    steering = (float(np.pi), 0.3) if car_like else None  # car 2 faces car 1 (west)
     detours, first_deadlock = [], None
     for t in np.arange(0.0, depart_s + CONFIG.window_s + 1.0, STEP_S):
         peer = dataclasses.replace(seen(ONE), waiting=waits == "peer" and t < depart_s)
         departed = waits != "we" or t >= depart_s
-        detours.append(two.goal(t, TWO["position"], TWO["goal"], {1: peer}, departed, KEEP_CLEAR, room, WALL_CLEAR))
+        detours.append(two.goal(t, TWO["position"], TWO["goal"], {1: peer}, departed, KEEP_CLEAR, room, WALL_CLEAR,
+                                steering=steering))
         if two.deadlocks and first_deadlock is None:
             first_deadlock = t
-    assert first_deadlock is not None and first_deadlock >= depart_s + CONFIG.window_s - 0.25 - 1e-9
-    assert any(d is not None for d in detours)  # then car 2 gives way, as in any standoff
+    after_departure = depart_s + CONFIG.window_s - 0.25 - 1e-9
+    assert first_deadlock is not None and (first_deadlock >= after_departure) == car_like
+    assert any(d is not None for d in detours)  # car 2 gives way, as in any standoff
 
 
 def test_waiting_for_a_car_that_gets_somewhere_is_no_deadlock(room):
