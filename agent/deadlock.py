@@ -205,9 +205,9 @@ class DeadlockWatch:
         fleet that turns in place keeps the window its bank was measured with
         (docs/design/safety.md, "Deadlocks")."""
         car_like = steering is not None
-        self.history.append((now, {self.car_id: (np.asarray(position, float), np.asarray(goal, float), False,
-                                                 car_like and waiting)}
-                             | {cid: (p.position, p.goal, p.halting, car_like and p.waiting) for cid, p in peers.items()}))
+        ours = (np.asarray(position, float), np.asarray(goal, float), False, car_like and waiting)
+        self.history.append((now, {self.car_id: ours} | {cid: (p.position, p.goal, p.halting, car_like and p.waiting)
+                                                        for cid, p in peers.items()}))
         while self.history and self.history[0][0] < now - self.config.window_s - 1e-9:
             self.history.popleft()
 
@@ -260,7 +260,8 @@ class DeadlockWatch:
         whole window."""
         if self.stalled(car_id, now):
             return True
-        return self._window_full(now) and all(seen.get(car_id, (None, None, False, False))[2] for _, seen in self.history)
+        unseen = (None, None, False, False)
+        return self._window_full(now) and all(seen.get(car_id, unseen)[2] for _, seen in self.history)
 
     def _window_full(self, now: float) -> bool:
         """Whether the history spans a whole window (give or take a replan)."""
