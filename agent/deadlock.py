@@ -23,6 +23,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
@@ -46,6 +47,17 @@ LANE_STEP_M = 0.05
 """A detour keeps off the straight legs of a way that goes first, checked this often."""
 ASIDE_MAX_YIELDS = 4
 """A step aside ends after at most this many ``yield_s``, walled-in peer or not."""
+
+
+class Sample(NamedTuple):
+    """One car at one sample of the watch's window."""
+
+    position: np.ndarray
+    goal: np.ndarray | None
+    halting: bool
+    """Its plan ended at a standstill short of its goal."""
+    waiting: bool
+    """It had not departed yet (counted in a car-like fleet only: :meth:`DeadlockWatch._record`)."""
 
 
 @dataclass(frozen=True)
@@ -90,7 +102,7 @@ class DeadlockWatch:
     car_id: int
     config: DeadlockConfig
     history: deque = field(default_factory=deque)
-    """(t, {car id: position}) at the replans of the last window."""
+    """(t, {car id: Sample}) at the replans of the last window."""
     detour: Detour | None = None
     deadlocked: bool = False
     deadlocks: int = 0
@@ -205,9 +217,9 @@ class DeadlockWatch:
         fleet that turns in place keeps the window its bank was measured with
         (docs/design/safety.md, "Deadlocks")."""
         car_like = steering is not None
-        ours = (np.asarray(position, float), np.asarray(goal, float), False, car_like and waiting)
-        self.history.append((now, {self.car_id: ours} | {cid: (p.position, p.goal, p.halting, car_like and p.waiting)
-                                                        for cid, p in peers.items()}))
+        ours = Sample(np.asarray(position, float), np.asarray(goal, float), False, car_like and waiting)
+        theirs = {cid: Sample(p.position, p.goal, p.halting, car_like and p.waiting) for cid, p in peers.items()}
+        self.history.append((now, {self.car_id: ours} | theirs))
         while self.history and self.history[0][0] < now - self.config.window_s - 1e-9:
             self.history.popleft()
 
@@ -235,7 +247,7 @@ class DeadlockWatch:
     def _out_near(self, peers: dict[int, PeerSeen], blockers: frozenset[int] = frozenset()) -> list[int]:
         """The peers out and about (not at their goals, waiting or stuck) within
         group_radius_m of where we were last recorded, or among ``blockers``."""
-        here = self.history[-1][1][self.car_id][0]
+        here = self.history[-1][1][self.car_id].position
         return [cid for cid, p in peers.items() if not (p.at_goal or p.waiting or p.stuck)
                 and (cid in blockers or np.linalg.norm(p.position - here) <= self.config.group_radius_m)]
 
@@ -247,21 +259,20 @@ class DeadlockWatch:
         if not self._window_full(now):
             return False
         track = [seen.get(car_id) for _, seen in self.history]
-        if any(entry is None or entry[3] for entry in track):
+        if any(entry is None or entry.waiting for entry in track):
             return False
         (first, goal, _, _), (latest, latest_goal, _, _) = track[0], track[-1]
         if goal is not None and latest_goal is not None and np.array_equal(goal, latest_goal):
             progress = float(np.linalg.norm(first - goal) - np.linalg.norm(latest - goal))
             return progress < self.config.progress_m
-        return max(float(np.linalg.norm(p - latest)) for p, *_ in track) < self.config.progress_m
+        return max(float(np.linalg.norm(entry.position - latest)) for entry in track) < self.config.progress_m
 
     def stuck(self, car_id: int, now: float) -> bool:
         """Stalled, or halting (its plans ending short of its goal) at every sample of a
         whole window."""
         if self.stalled(car_id, now):
             return True
-        unseen = (None, None, False, False)
-        return self._window_full(now) and all(seen.get(car_id, unseen)[2] for _, seen in self.history)
+        return self._window_full(now) and all(car_id in seen and seen[car_id].halting for _, seen in self.history)
 
     def _window_full(self, now: float) -> bool:
         """Whether the history spans a whole window (give or take a replan)."""
