@@ -272,8 +272,10 @@ class CarAgent:
         )
         detour = self._give_way(now, motion.position, request.steering)
         if detour is not None:  # giving way in a deadlock (agent.deadlock): to the detour instead
+            way = np.array([motion.position, detour])
+            way = way if steering is None else turn_then(way, *steering)  # a car-like car turns there first
             request = dataclasses.replace(request, goal=detour, route=(), lane=(), t_arrive=t0 + ARRIVAL_SLACK_S
-                                          + float(np.linalg.norm(detour - motion.position)) / self.cruise)
+                                          + float(np.sum(np.linalg.norm(np.diff(way, axis=0), axis=1))) / self.cruise)
         elif now < self._lane_off_until:  # passing a peer head on, or stalled (car-like)
             request = dataclasses.replace(request, lane=())
         if self.liar is not None and now >= self.depart_at:  # a framer drives where it means harm
