@@ -272,8 +272,9 @@ class CarAgent:
         )
         detour = self._give_way(now, motion.position, request.steering)
         if detour is not None:  # giving way in a deadlock (agent.deadlock): to the detour instead
-            request = dataclasses.replace(request, goal=detour, route=(), lane=(),
-                                          t_arrive=detour_arrival(t0, motion.position, detour, steering, self.cruise))
+            aside = self.deadlock.detour is not None and self.deadlock.detour.for_peer is not None
+            request = dataclasses.replace(request, goal=detour, route=(), lane=(), t_arrive=detour_arrival(
+                t0, motion.position, detour, steering if aside else None, self.cruise))
         elif now < self._lane_off_until:  # passing a peer head on, or stalled (car-like)
             request = dataclasses.replace(request, lane=())
         if self.liar is not None and now >= self.depart_at:  # a framer drives where it means harm
@@ -486,11 +487,13 @@ def remaining_length(plan: Plan | None, car: CarConfig, position: np.ndarray, t0
 
 def detour_arrival(t0: float, position: np.ndarray, detour: np.ndarray, steering: tuple[float, float] | None,
                    cruise: float) -> float:
-    """When a car giving way (or stepping aside) is planned to reach its ``detour``: its
-    way there at ``cruise``, plus ARRIVAL_SLACK_S -- straight, or for a car-like car
-    (``steering``) with the turn that faces it there first (agent.steering.turn_then). A
-    detour behind a car-like car is a U-turn away: planned in the straight distance's time,
-    the plan cannot reach it and loops short."""
+    """When a car giving way or stepping aside is planned to reach its ``detour``: its way
+    there at ``cruise``, plus ARRIVAL_SLACK_S -- straight, or with the turn that faces a
+    car-like car there first (``steering``; agent.steering.turn_then). The caller passes
+    ``steering`` for a car-like car's step aside only: a parked car's spot lies behind or
+    beside it, a U-turn away, and in the straight distance's time its plans stop short and
+    fall back. A car that gives way has its detour for ``yield_s`` only, and planned over
+    the whole turn its plan swings wide, out of the room the detour was checked in."""
     if steering is None:
         return t0 + ARRIVAL_SLACK_S + float(np.linalg.norm(detour - position)) / cruise
     way = turn_then(np.array([position, detour], float), *steering)
