@@ -272,9 +272,8 @@ class CarAgent:
         )
         detour = self._give_way(now, motion.position, request.steering)
         if detour is not None:  # giving way in a deadlock (agent.deadlock): to the detour instead
-            aside = self.deadlock.detour is not None and self.deadlock.detour.for_peer is not None
-            request = dataclasses.replace(request, goal=detour, route=(), lane=(), t_arrive=detour_arrival(
-                t0, motion.position, detour, steering if aside else None, self.cruise))
+            request = dataclasses.replace(request, goal=detour, route=(), lane=(), t_arrive=t0 + ARRIVAL_SLACK_S
+                                          + float(np.linalg.norm(detour - motion.position)) / self.cruise)
         elif now < self._lane_off_until:  # passing a peer head on, or stalled (car-like)
             request = dataclasses.replace(request, lane=())
         if self.liar is not None and now >= self.depart_at:  # a framer drives where it means harm
@@ -448,8 +447,7 @@ class CarAgent:
         return {car_id: m for car_id, m in seen.items() if m is not None}
 
     def trust_message(self, now: float) -> TrustReport:
-        report = self.trust.report(self.car.id, self.next_seq("trust"), now, self.epsilon_0,
-                                   self.scenario.planner.transparency)
+        report = self.trust.report(self.car.id, self.next_seq("trust"), now, self.epsilon_0, self.scenario.planner.transparency)
         return self.liar.testimony(report) if self.liar is not None else report
 
     def trust_in(self, peer: int, now: float) -> float:
@@ -483,18 +481,3 @@ def remaining_length(plan: Plan | None, car: CarConfig, position: np.ndarray, t0
     if steering is not None:
         points = turn_then(points, *steering)
     return float(np.sum(np.linalg.norm(np.diff(points, axis=0), axis=1)))
-
-
-def detour_arrival(t0: float, position: np.ndarray, detour: np.ndarray, steering: tuple[float, float] | None,
-                   cruise: float) -> float:
-    """When a car giving way or stepping aside is planned to reach its ``detour``: its way
-    there at ``cruise``, plus ARRIVAL_SLACK_S -- straight, or with the turn that faces a
-    car-like car there first (``steering``; agent.steering.turn_then). The caller passes
-    ``steering`` for a car-like car's step aside only: a parked car's spot lies behind or
-    beside it, a U-turn away, and in the straight distance's time its plans stop short and
-    fall back. A car that gives way has its detour for ``yield_s`` only, and planned over
-    the whole turn its plan swings wide, out of the room the detour was checked in."""
-    if steering is None:
-        return t0 + ARRIVAL_SLACK_S + float(np.linalg.norm(detour - position)) / cruise
-    way = turn_then(np.array([position, detour], float), *steering)
-    return t0 + ARRIVAL_SLACK_S + float(np.sum(np.linalg.norm(np.diff(way, axis=0), axis=1))) / cruise

@@ -7,7 +7,6 @@ import math
 import numpy as np
 import pytest
 
-from trustfg.agent.car_agent import detour_arrival
 from trustfg.agent.config import Obstacle, PlannerConfig, VehicleConfig, VerifyConfig, WorldConfig
 from trustfg.agent.gp import Plan
 from trustfg.agent.planner import PlanRequest, _seed_entries, plan_trajectory
@@ -177,24 +176,3 @@ def test_a_way_on_starts_with_the_turn_to_its_first_point_beyond_the_turning_cir
 
 def path_length_of(points: np.ndarray) -> float:
     return float(np.sum(np.linalg.norm(np.diff(points, axis=0), axis=1)))
-
-
-@pytest.mark.parametrize("off_nose_deg", [120.0, 150.0, 180.0, -150.0, -120.0])
-def test_a_car_like_car_reaches_a_detour_behind_it_in_the_time_it_is_given(open_sdf, off_nose_deg):
-    """A car-like car standing still, giving way (or stepping aside) to a point 0.6 m
-    behind it (``off_nose_deg`` off its nose): planned to arrive when
-    agent.car_agent.detour_arrival says -- the turn there at its radius counted -- its plan
-    verifies from its heading and ends at the point. (In the straight distance's time each
-    plan stops 0.1-0.4 m short.)"""
-    heading, planner = 0.25, PlannerConfig()
-    position = np.array([0.0, 0.0])
-    angle = heading + math.radians(off_nose_deg)
-    detour = position + 0.6 * np.array([math.cos(angle), math.sin(angle)])
-    t_arrive = detour_arrival(0.0, position, detour, (heading, R), planner.cruise_speed_mps)
-    assert t_arrive > detour_arrival(0.0, position, detour, None, planner.cruise_speed_mps)
-    request = PlanRequest(t_now=0.0, position=position, velocity=np.zeros(2), goal=detour, t_arrive=t_arrive,
-                          epsilon_obstacle=0.25, steering=(heading, R))
-    bounds = Bounds.of(0.25, 0.2, [], VehicleConfig(steering="car", min_turn_radius_m=R))
-    outcome = plan_safely(request, bounds, planner, VerifyConfig(), open_sdf, None)
-    assert outcome.outcome in (FIRST, RETRY), outcome.tried
-    assert np.linalg.norm(outcome.plan.positions[-1] - detour) < 0.05
